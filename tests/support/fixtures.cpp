@@ -1,0 +1,45 @@
+#include "fixtures.hpp"
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#ifndef MANIP_FIXTURE_DIR
+#define MANIP_FIXTURE_DIR "tests/fixtures"
+#endif
+
+namespace manip::testutil {
+
+std::string fixture_path(const std::string& relative) { return std::string(MANIP_FIXTURE_DIR) + "/" + relative; }
+
+std::vector<double> read_numbers(const std::string& relative) {
+  const std::string path = fixture_path(relative);
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open fixture " + path);
+  std::vector<double> out;
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream ls(line);
+    std::string tok;
+    while (ls >> tok) {
+      for (auto& c : tok)
+        if (c == ',') c = ' ';
+      std::istringstream ts(tok);
+      double v;
+      while (ts >> v) out.push_back(v);
+    }
+  }
+  return out;
+}
+
+std::string temp_dir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / ("manip_test_" + name);
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir.string();
+}
+
+}  // namespace manip::testutil

@@ -1,0 +1,15 @@
+#pragma once
+// Reading reference vectors produced by the Python scripts in tests/fixtures/.
+// Format: plain text, one number per whitespace-separated token, '#' comments.
+#include <string>
+#include <vector>
+
+namespace manip::testutil {
+
+std::string fixture_path(const std::string& relative);
+// All numbers of a fixture file, in order. Throws std::runtime_error naming the file.
+std::vector<double> read_numbers(const std::string& relative);
+// A fresh empty directory under the build tree for one test's outputs.
+std::string temp_dir(const std::string& name);
+
+}  // namespace manip::testutil
