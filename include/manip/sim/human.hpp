@@ -1,0 +1,45 @@
+#pragma once
+// A simulated person holding the handle. The hand is rigidly attached to the
+// handle, so the plant the person is coupled to (ideal admittance, or the
+// stages of the controller's sim backend) solves for the common acceleration:
+//
+//   human:  M_x(t) xdd = h(t) + u_ext          (endpoint form of eq. 1 + 2)
+//   plant:  u_ext = force the handle applies on the hand
+//
+// e.g. on the ideal admittance (eq. 19-20): (M_x + M_adm + M_handle) xdd =
+// h - D_adm xd + u_pert. Everything is in the *shoulder* frame.
+// Implementations must not allocate in endpoint_dynamics/advance (they run
+// inside the 4 kHz loop of manip_rt's sim backend); begin_trial may not
+// allocate either once constructed.
+#include <cstdint>
+
+#include "manip/common/types.hpp"
+
+namespace manip::sim {
+
+// One reach the person intends to make.
+struct ReachSpec {
+  Vec2 start_shoulder_m{0.0, 0.30};
+  Vec2 goal_shoulder_m{0.0, 0.55};
+  double t_start_s{0.5};    // movement onset, seconds after begin_trial
+  double duration_s{3.0};   // minimum-jerk duration
+  double lateral_bow_m{0};  // path variation: peak lateral deviation of the plan
+};
+
+class HumanModel {
+ public:
+  virtual ~HumanModel() = default;
+  // Put the hand at rest at reach.start_shoulder_m with time 0 and plan the reach.
+  // The seed fixes every random process of this trial (paired runs reuse it).
+  virtual void begin_trial(const ReachSpec& reach, std::uint64_t seed) = 0;
+  // Endpoint inertia M_x [kg] and the endpoint force h [N] the arm produces at
+  // the current state (muscles, feedback, noise, minus velocity-product terms).
+  virtual void endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) = 0;
+  // Advance time by dt with the endpoint acceleration imposed by the plant.
+  virtual void advance(double dt_s, const Vec2& xdd_hand_mps2) = 0;
+  [[nodiscard]] virtual Vec2 hand_position_m() const = 0;
+  [[nodiscard]] virtual Vec2 hand_velocity_mps() const = 0;
+  [[nodiscard]] virtual double time_s() const = 0;
+};
+
+}  // namespace manip::sim
