@@ -12,6 +12,7 @@
 // inside the 4 kHz loop of manip_rt's sim backend); begin_trial may not
 // allocate either once constructed.
 #include <cstdint>
+#include <string>
 
 #include "manip/common/types.hpp"
 
@@ -40,6 +41,16 @@ class HumanModel {
   [[nodiscard]] virtual Vec2 hand_position_m() const = 0;
   [[nodiscard]] virtual Vec2 hand_velocity_mps() const = 0;
   [[nodiscard]] virtual double time_s() const = 0;
+};
+
+// Optional for a HumanModel: the endpoint impedance about its current state,
+// used as ground truth by the session runner (averaged over [0, T_est] of the
+// unperturbed twin).
+class TruthSource {
+ public:
+  virtual ~TruthSource() = default;
+  virtual void endpoint_impedance(Mat2& d_nspm, Mat2& k_npm) const = 0;
+  [[nodiscard]] virtual std::string truth_model() const = 0;
 };
 
 }  // namespace manip::sim

@@ -32,7 +32,7 @@ struct LinearHumanParams {
   double sample_rate_hz{4000.0};               // for the delay line
 };
 
-class LinearImpedanceHuman final : public HumanModel {
+class LinearImpedanceHuman final : public HumanModel, public TruthSource {
  public:
   explicit LinearImpedanceHuman(const LinearHumanParams& p);
   void begin_trial(const ReachSpec& reach, std::uint64_t seed) override;
@@ -42,6 +42,11 @@ class LinearImpedanceHuman final : public HumanModel {
   [[nodiscard]] Vec2 hand_velocity_mps() const override { return xd_; }
   [[nodiscard]] double time_s() const override { return t_; }
   [[nodiscard]] const LinearHumanParams& params() const { return p_; }
+  void endpoint_impedance(Mat2& d_nspm, Mat2& k_npm) const override {
+    d_nspm = p_.d_nspm;
+    k_npm = p_.k_npm;
+  }
+  [[nodiscard]] std::string truth_model() const override { return "linear-impedance"; }
 
  private:
   LinearHumanParams p_;

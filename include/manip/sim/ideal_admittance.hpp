@@ -1,0 +1,41 @@
+#pragma once
+// The manipulandum as the paper's estimator assumes it: a perfectly rendered
+// admittance (eq. 19-20). With the hand rigidly on the handle:
+//   (M_x + M_adm + M_handle) xdd = h - D_adm xd + u_pert
+// and the force sensor reads f_s = M_adm xdd + D_adm xd - u_pert (force of the
+// hand side on the sensor). Shoulder-frame axes; M_adm, D_adm diagonal per the
+// session message, so frame rotation does not change them.
+#include <Eigen/Cholesky>
+
+#include "manip/common/types.hpp"
+#include "manip/sim/human.hpp"
+
+namespace manip::sim {
+
+struct AdmittanceParams {
+  Mat2 m_adm_kg{Mat2::Identity() * 5.0};     // paper §5.1
+  Mat2 d_adm_nspm{Mat2::Identity() * 15.0};  // paper §5.1
+  Mat2 m_handle_kg{Mat2::Identity() * 0.3};  // handle above the sensor (config/participant.yaml rationale)
+};
+
+struct PlantSample {
+  Vec2 xdd_mps2{Vec2::Zero()};
+  Vec2 f_sensor_n{Vec2::Zero()};
+};
+
+// Advances human + ideal admittance by dt (semi-implicit: acceleration from
+// the state at the start of the step). Never allocates.
+inline PlantSample step_ideal_admittance(HumanModel& human, const AdmittanceParams& p, const Vec2& u_pert_n,
+                                         double dt_s) {
+  Mat2 m_x;
+  Vec2 h;
+  human.endpoint_dynamics(m_x, h);
+  const Vec2 xd = human.hand_velocity_mps();
+  PlantSample s;
+  s.xdd_mps2 = (m_x + p.m_adm_kg + p.m_handle_kg).ldlt().solve(h - p.d_adm_nspm * xd + u_pert_n);
+  s.f_sensor_n = p.m_adm_kg * s.xdd_mps2 + p.d_adm_nspm * xd - u_pert_n;
+  human.advance(dt_s, s.xdd_mps2);
+  return s;
+}
+
+}  // namespace manip::sim

@@ -1,0 +1,180 @@
+#include "manip/control/bus.hpp"
+
+#include <lcm/lcm-cpp.hpp>
+
+#include <chrono>
+#include <cmath>
+
+#include "manip/common/channels.hpp"
+#include "manip/control/messages.hpp"
+
+namespace manip::control {
+namespace {
+std::int64_t mono_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+}  // namespace
+
+CommandLimits CommandLimits::from_config(const RtConfig& cfg) {
+  CommandLimits l;
+  l.frame = cfg.frames;
+  l.wall_start_m = cfg.safety.wall_start_m;
+  l.target_radius_m = cfg.protocol.target_radius_m;
+  l.trigger_x2_shoulder_m = cfg.perturbation.trigger_x2_shoulder_m;
+  l.require_trigger_between = cfg.perturbed_count() > 0;
+  return l;
+}
+
+Reject validate_command(const manip::command_t& c, const CommandLimits& lim) {
+  if (c.kind < manip::command_t::START_SESSION || c.kind > manip::command_t::FAULT_RESET) return Reject::kUnknownKind;
+  if (c.kind != manip::command_t::SET_TARGETS) return Reject::kNone;
+  const Vec2 s(c.start_shoulder_m[0], c.start_shoulder_m[1]);
+  const Vec2 g(c.goal_shoulder_m[0], c.goal_shoulder_m[1]);
+  if (!s.allFinite() || !g.allFinite()) return Reject::kNotFinite;
+  for (const Vec2& t : {s, g}) {
+    const Vec2 w = lim.frame.point_to_workspace(t);
+    if (std::abs(w.x()) + lim.target_radius_m > lim.wall_start_m || std::abs(w.y()) + lim.target_radius_m > lim.wall_start_m)
+      return Reject::kOutOfWorkspace;
+  }
+  if ((g - s).norm() < 2.0 * lim.target_radius_m) return Reject::kTargetsTooClose;
+  if (lim.require_trigger_between &&
+      !((lim.trigger_x2_shoulder_m - s.y()) * (lim.trigger_x2_shoulder_m - g.y()) < 0.0))
+    return Reject::kTriggerNotBetweenTargets;
+  return Reject::kNone;
+}
+
+std::optional<manip::command_status_t> CommandGate::submit(const void* data, int size, std::int64_t utime_now,
+                                                           std::int8_t mode_now) {
+  ++received_;
+  manip::command_status_t st{};
+  st.utime = utime_now;
+  st.mode = mode_now;
+  st.accepted = false;
+  manip::command_t c{};
+  if (size <= 0 || c.decode(data, 0, size) != size) {
+    ++rejected_;
+    st.seq = -1;
+    st.kind = 0;
+    st.reason = reject_text(Reject::kUndecodable);
+    return st;
+  }
+  st.seq = c.seq;
+  st.kind = c.kind;
+  Reject r = validate_command(c, lim_);
+  if (r == Reject::kNone) {
+    Command cmd;
+    cmd.seq = c.seq;
+    cmd.kind = c.kind;
+    cmd.start_shoulder_m = Vec2(c.start_shoulder_m[0], c.start_shoulder_m[1]);
+    cmd.goal_shoulder_m = Vec2(c.goal_shoulder_m[0], c.goal_shoulder_m[1]);
+    if (q_.try_enqueue(cmd)) return std::nullopt;
+    r = Reject::kQueueFull;
+  }
+  ++rejected_;
+  st.reason = reject_text(r);
+  if (r == Reject::kUnknownKind) {
+    st.reason += ' ';
+    st.reason += std::to_string(static_cast<int>(c.kind));
+  }
+  return st;
+}
+
+Bus::Bus(const RtConfig& cfg, Links links)
+    : cfg_(cfg), links_(links), gate_(*links.to_loop, CommandLimits::from_config(cfg)) {}
+
+Bus::~Bus() {
+  if (lcm_ && sub_) lcm_->unsubscribe(sub_);
+}
+
+bool Bus::open(const std::string& url, std::string& err) {
+  lcm_ = std::make_unique<lcm::LCM>(url);
+  if (!lcm_->good()) {
+    lcm_.reset();
+    err = "cannot create LCM with URL '" + url +
+          "' (for udpm: is there a multicast route? e.g. `ip route add 224.0.0.0/4 dev lo` for loopback; "
+          "or pass --lcm-url none to run without the live bus)";
+    return false;
+  }
+  sub_ = lcm_->subscribe(channels::kCommand, &Bus::on_command, this);
+  if (sub_) sub_->setQueueCapacity(cfg_.bus.subscription_queue_capacity);
+  next_health_ns_ = mono_ns();
+  return true;
+}
+
+template <class Msg>
+void Bus::publish(const char* channel, const Msg& m) {
+  if (!lcm_) return;
+  if (lcm_->publish(channel, &m) != 0) ++publish_errors_;
+}
+
+void Bus::publish_session(const manip::session_t& s) { publish(channels::kSession, s); }
+void Bus::publish_fault(const manip::fault_t& f) { publish(channels::kFault, f); }
+
+void Bus::on_command(const lcm::ReceiveBuffer* rbuf, const std::string& /*channel*/) {
+  const std::int8_t mode = links_.status ? links_.status->mode.load(std::memory_order_relaxed) : 0;
+  auto rejected = gate_.submit(rbuf->data, static_cast<int>(rbuf->data_size), wall_clock_us(), mode);
+  if (rejected) {
+    publish(channels::kCommandStatus, *rejected);
+    if (links_.to_logger) links_.to_logger->enqueue(AuxRecord(*rejected));
+  }
+}
+
+void Bus::drain_loop() {
+  if (!links_.from_loop) return;
+  LoopRecord r;
+  while (links_.from_loop->try_dequeue(r)) {
+    if (const auto* s = std::get_if<manip::state_t>(&r)) {
+      publish(channels::kStateLive, *s);
+      ++published_states_;
+    } else if (const auto* e = std::get_if<TrialEventRecord>(&r)) {
+      publish(channels::kTrial, to_message(*e));
+    } else if (const auto* c = std::get_if<CommandResultRecord>(&r)) {
+      publish(channels::kCommandStatus, to_message(*c));
+    }
+    // FaultRecord: published with its history by the logger's fault sink.
+  }
+}
+
+void Bus::publish_health() {
+  manip::health_t h{};
+  h.utime = wall_clock_us();
+  if (links_.status) {
+    const auto& s = *links_.status;
+    h.cycle = s.cycle.load(std::memory_order_relaxed);
+    h.mode = s.mode.load(std::memory_order_relaxed);
+    h.fault_flags = static_cast<std::int32_t>(s.fault_flags.load(std::memory_order_relaxed));
+    h.logger_drops = s.log_drops.load(std::memory_order_relaxed);
+    h.publisher_drops = s.bus_drops.load(std::memory_order_relaxed);
+    h.command_rejects = s.commands_rejected.load(std::memory_order_relaxed) + gate_.rejected();
+  }
+  if (links_.timing) {
+    const TimingSnapshot t = links_.timing->snapshot();
+    h.wakeup_latency_p50_us = t.latency_p50_us;
+    h.wakeup_latency_p99_us = t.latency_p99_us;
+    h.wakeup_latency_max_us = t.latency_max_us;
+    h.compute_p99_us = t.compute_p99_us;
+    h.compute_max_us = t.compute_max_us;
+    h.overruns = t.overruns;
+  }
+  publish(channels::kHealth, h);
+  if (links_.to_logger) links_.to_logger->enqueue(AuxRecord(h));
+}
+
+void Bus::poll(int timeout_ms) {
+  if (lcm_) lcm_->handleTimeout(timeout_ms);
+  drain_loop();
+  const std::int64_t now = mono_ns();
+  if (now >= next_health_ns_) {
+    publish_health();
+    next_health_ns_ = now + static_cast<std::int64_t>(1e9 / cfg_.bus.health_rate_hz);
+  }
+}
+
+void Bus::run(const std::atomic<bool>& stop) {
+  while (!stop.load(std::memory_order_acquire)) poll(2);
+  drain_loop();
+  publish_health();
+}
+
+}  // namespace manip::control

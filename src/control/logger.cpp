@@ -1,0 +1,190 @@
+#include "manip/control/logger.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <thread>
+
+#include "manip/common/channels.hpp"
+#include "manip/control/messages.hpp"
+
+namespace manip::control {
+namespace {
+std::int64_t mono_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+}  // namespace
+
+Logger::Logger(RecordQueue& queue, int fault_history_cycles, double flush_interval_s)
+    : q_(queue),
+      ring_(static_cast<std::size_t>(fault_history_cycles > 0 ? fault_history_cycles : 1)),
+      flush_interval_s_(flush_interval_s) {}
+
+Logger::~Logger() {
+  if (open_) {
+    std::string err;
+    close(err);
+  }
+}
+
+bool Logger::open(const std::string& path, const manip::session_t& session, std::string& err) {
+  if (!w_.open(path)) {
+    err = w_.error();
+    return false;
+  }
+  open_ = true;
+  last_utime_ = session.utime_start;
+  if (!w_.write_message(channels::kSession, session.utime_start, session) || !w_.flush()) {
+    err = w_.error();
+    fail(err);
+    return false;
+  }
+  stats_.events_in_file = w_.events_written();
+  last_flush_ns_ = mono_ns();
+  return true;
+}
+
+void Logger::fail(const std::string& why) {
+  if (failed_.load(std::memory_order_relaxed)) return;
+  {
+    std::lock_guard<std::mutex> lk(mu_);
+    error_ = why;
+  }
+  failed_.store(true, std::memory_order_release);
+  std::fprintf(stderr,
+               "\nmanip_rt: *** LOG WRITE FAILED: %s ***\n"
+               "manip_rt: *** the session is being stopped: motors go to the safe law, no further data is recorded ***\n",
+               why.c_str());
+  std::fflush(stderr);
+}
+
+std::string Logger::error() const {
+  std::lock_guard<std::mutex> lk(mu_);
+  return error_;
+}
+
+LoggerStats Logger::stats() const {
+  std::lock_guard<std::mutex> lk(mu_);
+  return published_;
+}
+
+void Logger::publish_stats() {
+  std::lock_guard<std::mutex> lk(mu_);
+  published_ = stats_;
+}
+
+template <class Msg>
+void Logger::write(const char* channel, std::int64_t utime, const Msg& m) {
+  if (!open_ || failed_.load(std::memory_order_relaxed)) {
+    ++stats_.discarded;
+    return;
+  }
+  // Event timestamps must not go backwards in a log: bus-thread records carry
+  // wall-clock times; clamp them to the last loop time.
+  if (utime < last_utime_) utime = last_utime_;
+  last_utime_ = utime;
+  if (!w_.write_message(channel, utime, m)) fail(w_.error());
+}
+
+void Logger::handle(const LoopRecord& r) {
+  if (const auto* s = std::get_if<manip::state_t>(&r)) {
+    if (stats_.last_cycle >= 0 && s->cycle != stats_.last_cycle + 1)
+      stats_.missing_cycles += s->cycle - stats_.last_cycle - 1;
+    if (stats_.first_cycle < 0) stats_.first_cycle = s->cycle;
+    stats_.last_cycle = s->cycle;
+    ring_[ring_head_] = *s;
+    ring_head_ = (ring_head_ + 1) % ring_.size();
+    if (ring_fill_ < ring_.size()) ++ring_fill_;
+    ++stats_.states;
+    write(channels::kState, s->utime, *s);
+  } else if (const auto* e = std::get_if<TrialEventRecord>(&r)) {
+    ++stats_.events;
+    write(channels::kTrial, e->utime, to_message(*e));
+  } else if (const auto* f = std::get_if<FaultRecord>(&r)) {
+    ++stats_.events;
+    ++stats_.faults;
+    manip::fault_t m{};
+    m.utime = f->utime;
+    m.cycle = f->cycle;
+    m.fault_flags = static_cast<std::int32_t>(f->fault_flags);
+    m.reason = fault_reason(*f);
+    m.n_history = static_cast<std::int32_t>(ring_fill_);
+    m.history.reserve(ring_fill_);
+    const std::size_t start = (ring_head_ + ring_.size() - ring_fill_) % ring_.size();
+    for (std::size_t i = 0; i < ring_fill_; ++i) m.history.push_back(ring_[(start + i) % ring_.size()]);
+    write(channels::kFault, f->utime, m);
+    if (print_faults_)
+      std::fprintf(stderr, "manip_rt: FAULT at cycle %lld: %s (latched: %s; %d cycles of history logged)\n",
+                   static_cast<long long>(f->cycle), m.reason.c_str(), fault_names(f->fault_flags).c_str(),
+                   m.n_history);
+    if (fault_sink_) fault_sink_(m);
+  } else if (const auto* c = std::get_if<CommandResultRecord>(&r)) {
+    ++stats_.events;
+    write(channels::kCommandStatus, c->utime, to_message(*c));
+  }
+}
+
+void Logger::handle_aux(const AuxRecord& r) {
+  ++stats_.events;
+  if (const auto* h = std::get_if<manip::health_t>(&r))
+    write(channels::kHealth, h->utime, *h);
+  else if (const auto* c = std::get_if<manip::command_status_t>(&r))
+    write(channels::kCommandStatus, c->utime, *c);
+}
+
+void Logger::maybe_flush(bool force) {
+  if (!open_ || failed_.load(std::memory_order_relaxed)) return;
+  const std::int64_t now = mono_ns();
+  if (!force && static_cast<double>(now - last_flush_ns_) * 1e-9 < flush_interval_s_) return;
+  last_flush_ns_ = now;
+  ++stats_.flushes;
+  if (!w_.flush()) fail(w_.error());
+}
+
+std::size_t Logger::drain() {
+  std::size_t n = 0;
+  LoopRecord r;
+  while (q_.try_dequeue(r)) {
+    handle(r);
+    ++n;
+    if ((n & 4095) == 0) maybe_flush(false);
+  }
+  if (aux_) {
+    AuxRecord a;
+    while (aux_->try_dequeue(a)) {
+      handle_aux(a);
+      ++n;
+    }
+  }
+  maybe_flush(false);
+  stats_.events_in_file = w_.events_written();
+  publish_stats();
+  return n;
+}
+
+void Logger::run(const std::atomic<bool>& stop) {
+  for (;;) {
+    const bool stopping = stop.load(std::memory_order_acquire);
+    const std::size_t n = drain();
+    if (stopping && n == 0 && q_.size_approx() == 0) break;
+    if (n == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+}
+
+bool Logger::close(std::string& err) {
+  drain();
+  if (open_) {
+    maybe_flush(true);
+    if (!w_.close() && !failed()) fail(w_.error());
+    stats_.events_in_file = w_.events_written();
+    open_ = false;
+  }
+  publish_stats();
+  if (failed()) {
+    err = error();
+    return false;
+  }
+  return true;
+}
+
+}  // namespace manip::control

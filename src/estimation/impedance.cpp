@@ -1,0 +1,393 @@
+#include "manip/estimation/impedance.hpp"
+
+#include <Eigen/Dense>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <unsupported/Eigen/MatrixFunctions>
+
+namespace manip::estimation {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// A parameter of the identification model: element (i, j) of M (0), D (1)
+// or K (2); `sym` marks K12 = K21 shared (eq. 30).
+struct Param {
+  int mat, i, j;
+  bool sym;
+};
+
+std::vector<Param> layout(const LsOptions& o) {
+  std::vector<Param> p;
+  if (o.estimate_m)
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) p.push_back({0, i, j, false});
+  for (int i = 0; i < 2; ++i)
+    for (int j = 0; j < 2; ++j) p.push_back({1, i, j, false});
+  if (o.k_model == StiffnessModel::symmetric) {
+    p.push_back({2, 0, 0, false});
+    p.push_back({2, 0, 1, true});
+    p.push_back({2, 1, 1, false});
+  } else {
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) p.push_back({2, i, j, false});
+  }
+  return p;
+}
+
+double column_normalised_condition(const Eigen::MatrixXd& a) {
+  Eigen::MatrixXd an = a;
+  for (Eigen::Index c = 0; c < an.cols(); ++c) {
+    const double n = an.col(c).norm();
+    if (n > 0) an.col(c) /= n;
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(an);
+  const auto& s = svd.singularValues();
+  return s(s.size() - 1) > 0 ? s(0) / s(s.size() - 1) : std::numeric_limits<double>::infinity();
+}
+
+void assign(ImpedanceEstimate& e, const std::vector<Param>& lay, const Eigen::VectorXd& z, const Eigen::VectorXd& se) {
+  for (std::size_t p = 0; p < lay.size(); ++p) {
+    const auto& q = lay[p];
+    Mat2& v = q.mat == 0 ? e.m_kg : (q.mat == 1 ? e.d_nspm : e.k_npm);
+    Mat2& s = q.mat == 0 ? e.m_se : (q.mat == 1 ? e.d_se : e.k_se);
+    v(q.i, q.j) = z(static_cast<Eigen::Index>(p));
+    s(q.i, q.j) = se(static_cast<Eigen::Index>(p));
+    if (q.sym) {
+      v(q.j, q.i) = v(q.i, q.j);
+      s(q.j, q.i) = s(q.i, q.j);
+    }
+  }
+}
+
+}  // namespace
+
+double t_quantile_975(int dof) {
+  static const double table[] = {12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+                                 2.201,  2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
+                                 2.080,  2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042};
+  if (dof < 1) return kNaN;
+  if (dof <= 30) return table[dof - 1];
+  // Cornish-Fisher expansion about the normal quantile; < 1e-3 off beyond 30 dof.
+  const double z = 1.959964, n = dof;
+  return z + (z * z * z + z) / (4 * n) + (5 * std::pow(z, 5) + 16 * z * z * z + 3 * z) / (96 * n * n);
+}
+
+void flag_identifiability(ImpedanceEstimate& e, double thr) {
+  auto check = [&](const Mat2& v, const Mat2& se, const char* name) {
+    const double floor = 0.1 * v.norm();
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) {
+        if (!std::isfinite(se(i, j))) continue;
+        if (se(i, j) > thr * std::max(std::abs(v(i, j)), floor)) {
+          e.identifiable = false;
+          if (e.flag.empty())
+            e.flag = std::string(name) + std::to_string(i + 1) + std::to_string(j + 1) + " SE " +
+                     std::to_string(se(i, j)) + " exceeds " + std::to_string(static_cast<int>(thr * 100)) +
+                     "% of its scale";
+        }
+      }
+  };
+  check(e.d_nspm, e.d_se, "D");
+  check(e.k_npm, e.k_se, "K");
+  if (e.condition > 1e8) {
+    e.identifiable = false;
+    if (e.flag.empty()) e.flag = "condition number " + std::to_string(e.condition) + " > 1e8";
+  }
+}
+
+ImpedanceEstimate fit_equation_error(std::span<const VariationalWindow> windows, std::span<const Mat2> m_bsp,
+                                     const LsOptions& opt) {
+  const auto lay = layout(opt);
+  const auto np = static_cast<Eigen::Index>(lay.size());
+  Eigen::Index rows = 0;
+  for (const auto& w : windows) rows += 2 * static_cast<Eigen::Index>(w.size());
+  if (rows <= np) throw std::invalid_argument("equation-error fit: not enough samples");
+  Eigen::MatrixXd a = Eigen::MatrixXd::Zero(rows, np);
+  Eigen::VectorXd b(rows);
+  Eigen::Index r = 0;
+  for (std::size_t wi = 0; wi < windows.size(); ++wi) {
+    const auto& w = windows[wi];
+    const auto& du = opt.force == ForceSource::admittance ? w.du_ext_adm : w.du_ext_force;
+    for (std::size_t k = 0; k < w.size(); ++k) {
+      for (int row = 0; row < 2; ++row, ++r) {
+        double bk = du[k](row);
+        if (!opt.estimate_m) bk -= (m_bsp[wi] * w.dxdd[k])(row);  // eq. 32
+        b(r) = bk;
+        for (Eigen::Index p = 0; p < np; ++p) {
+          const auto& q = lay[static_cast<std::size_t>(p)];
+          const Vec2& sig = q.mat == 0 ? w.dxdd[k] : (q.mat == 1 ? w.dxd[k] : w.dx[k]);  // eq. 28/31
+          double v = 0.0;
+          if (q.i == row) v += sig(q.j);
+          if (q.sym && q.j == row) v += sig(q.i);
+          a(r, p) = v;
+        }
+      }
+    }
+  }
+  // SVD instead of the normal equations of eq. 29: same solution, stable.
+  Eigen::BDCSVD<Eigen::MatrixXd> svd(a, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const Eigen::VectorXd z = svd.solve(b);
+  const Eigen::VectorXd res = b - a * z;
+  const double dof = static_cast<double>(rows - np);
+  const double sigma2 = res.squaredNorm() / dof;
+  const auto& s = svd.singularValues();
+  Eigen::VectorXd inv_s2 = s.array().square().inverse().matrix();
+  for (Eigen::Index i = 0; i < inv_s2.size(); ++i)
+    if (!std::isfinite(inv_s2(i))) inv_s2(i) = kNaN;
+  const Eigen::MatrixXd cov = svd.matrixV() * inv_s2.asDiagonal() * svd.matrixV().transpose() * sigma2;
+  ImpedanceEstimate e;
+  e.m_estimated = opt.estimate_m;
+  if (!opt.estimate_m) {
+    Mat2 mean = Mat2::Zero();
+    for (const auto& m : m_bsp) mean += m;
+    e.m_kg = mean / static_cast<double>(std::max<std::size_t>(1, m_bsp.size()));
+  }
+  assign(e, lay, z, cov.diagonal().cwiseSqrt());
+  e.se_kind = "least-squares";
+  e.ci_factor = t_quantile_975(static_cast<int>(dof));
+  e.residual_rms = std::sqrt(res.squaredNorm() / static_cast<double>(rows));
+  const double var_b = (b.array() - b.mean()).square().mean();
+  e.vaf = var_b > 0 ? 1.0 - (res.array() - res.mean()).square().mean() / var_b : 0.0;
+  e.condition = column_normalised_condition(a);
+  e.n_samples = static_cast<int>(rows / 2);
+  e.n_params = static_cast<int>(np);
+  e.n_trials = static_cast<int>(windows.size());
+  flag_identifiability(e);
+  return e;
+}
+
+// ---------------------------------------------------------------------------
+
+OeWindow make_oe_window(const SessionInfo& info, const TrialData& t, const Mat2& m_bsp, const OeSettings& s) {
+  if (t.onset_index < 0) throw std::invalid_argument("trial " + std::to_string(t.trial) + ": no perturbation onset");
+  const double fs = info.fs_hz;
+  const auto pre = static_cast<std::size_t>(std::llround(s.t_pre_s * fs));
+  const auto post = static_cast<std::size_t>(std::llround(s.t_est_s * fs));
+  const auto on = static_cast<std::size_t>(t.onset_index);
+  if (on < pre) throw std::invalid_argument("trial " + std::to_string(t.trial) + ": onset too close to the trial start");
+  if (on + post + 1 > t.size())
+    throw std::invalid_argument("trial " + std::to_string(t.trial) + ": ends before the estimation window");
+  OeWindow w;
+  w.trial = t.trial;
+  w.fs_hz = fs;
+  w.onset_offset = static_cast<int>(pre);
+  w.m_bsp_kg = m_bsp;
+  w.m_total_kg = m_bsp + info.m_adm_kg + info.m_handle_kg;
+  w.d_adm_nspm = info.d_adm_nspm;
+  w.x_m.assign(t.x_m.begin() + static_cast<std::ptrdiff_t>(on - pre),
+               t.x_m.begin() + static_cast<std::ptrdiff_t>(on + post + 1));
+  w.u_n.assign(t.u_pert_n.begin() + static_cast<std::ptrdiff_t>(on - pre),
+               t.u_pert_n.begin() + static_cast<std::ptrdiff_t>(on + post + 1));
+  return w;
+}
+
+std::vector<Vec2> simulate_variational(const OeWindow& w, const Mat2& d, const Mat2& k) {
+  // Exact zero-order-hold discretisation of the coupled arm + admittance.
+  const Mat2 minv = w.m_total_kg.inverse();
+  Eigen::Matrix<double, 6, 6> aug = Eigen::Matrix<double, 6, 6>::Zero();
+  aug.block<2, 2>(0, 2) = Mat2::Identity();
+  aug.block<2, 2>(2, 0) = -minv * k;
+  aug.block<2, 2>(2, 2) = -minv * (d + w.d_adm_nspm);
+  aug.block<2, 2>(2, 4) = minv;
+  const Eigen::Matrix<double, 6, 6> e = (aug / w.fs_hz).exp();
+  const Eigen::Matrix4d phi = e.block<4, 4>(0, 0);
+  const Eigen::Matrix<double, 4, 2> gam = e.block<4, 2>(0, 4);
+  std::vector<Vec2> out(w.x_m.size(), Vec2::Zero());
+  Eigen::Vector4d z = Eigen::Vector4d::Zero();
+  for (std::size_t i = static_cast<std::size_t>(w.onset_offset); i + 1 < out.size(); ++i) {
+    z = phi * z + gam * w.u_n[i];
+    out[i + 1] = z.head<2>();
+  }
+  return out;
+}
+
+namespace {
+
+struct OeProblem {
+  std::span<const OeWindow> windows;
+  std::vector<Eigen::MatrixXd> basis;  // orthonormal polynomial basis per window
+  std::vector<Eigen::VectorXd> y_perp; // projected measurement per window, both axes stacked
+  Eigen::Index rows{0};
+
+  OeProblem(std::span<const OeWindow> ws, int order) : windows(ws) {
+    for (const auto& w : ws) {
+      const auto n = static_cast<Eigen::Index>(w.x_m.size());
+      Eigen::MatrixXd p(n, order + 1);
+      for (Eigen::Index i = 0; i < n; ++i) {
+        const double t = 2.0 * static_cast<double>(i) / static_cast<double>(n - 1) - 1.0;  // [-1, 1]
+        double v = 1.0;
+        for (int c = 0; c <= order; ++c, v *= t) p(i, c) = v;
+      }
+      Eigen::HouseholderQR<Eigen::MatrixXd> qr(p);
+      basis.push_back(qr.householderQ() * Eigen::MatrixXd::Identity(n, order + 1));
+      Eigen::VectorXd y(2 * n);
+      for (Eigen::Index i = 0; i < n; ++i) {
+        y(i) = w.x_m[static_cast<std::size_t>(i)].x();
+        y(n + i) = w.x_m[static_cast<std::size_t>(i)].y();
+      }
+      y_perp.push_back(project(basis.back(), y));
+      rows += 2 * n;
+    }
+  }
+  static Eigen::VectorXd project(const Eigen::MatrixXd& q, const Eigen::VectorXd& y) {
+    const auto n = q.rows();
+    Eigen::VectorXd out(y.size());
+    out.head(n) = y.head(n) - q * (q.transpose() * y.head(n));
+    out.tail(n) = y.tail(n) - q * (q.transpose() * y.tail(n));
+    return out;
+  }
+  static void unpack(const Eigen::VectorXd& th, Mat2& d, Mat2& k) {
+    d << th(0), th(1), th(2), th(3);
+    k << th(4), th(5), th(5), th(6);
+  }
+  // Residual of the projected output error, optionally skipping one window.
+  Eigen::VectorXd residual(const Eigen::VectorXd& th, int skip) const {
+    Mat2 d, k;
+    unpack(th, d, k);
+    Eigen::VectorXd r(rows);
+    Eigen::Index off = 0;
+    for (std::size_t wi = 0; wi < windows.size(); ++wi) {
+      const auto n = static_cast<Eigen::Index>(windows[wi].x_m.size());
+      if (static_cast<int>(wi) == skip) {
+        r.segment(off, 2 * n).setZero();
+        off += 2 * n;
+        continue;
+      }
+      const auto sim = simulate_variational(windows[wi], d, k);
+      Eigen::VectorXd s(2 * n);
+      for (Eigen::Index i = 0; i < n; ++i) {
+        s(i) = sim[static_cast<std::size_t>(i)].x();
+        s(n + i) = sim[static_cast<std::size_t>(i)].y();
+      }
+      r.segment(off, 2 * n) = y_perp[wi] - project(basis[wi], s);
+      off += 2 * n;
+    }
+    return r;
+  }
+};
+
+struct LmResult {
+  Eigen::VectorXd theta;
+  Eigen::MatrixXd jac;
+  Eigen::VectorXd res;
+  int iterations{0};
+  bool converged{false};
+};
+
+LmResult levenberg_marquardt(const OeProblem& prob, Eigen::VectorXd th, int skip, int max_iter) {
+  LmResult out;
+  Eigen::VectorXd r = prob.residual(th, skip);
+  double cost = r.squaredNorm();
+  double lambda = 1e-3;
+  const auto np = th.size();
+  Eigen::MatrixXd jac(r.size(), np);
+  for (int it = 0; it < max_iter; ++it) {
+    out.iterations = it + 1;
+    for (Eigen::Index p = 0; p < np; ++p) {  // forward differences; the model is smooth in θ
+      Eigen::VectorXd tp = th;
+      const double h = 1e-6 * std::max(1.0, std::abs(th(p)));
+      tp(p) += h;
+      jac.col(p) = (prob.residual(tp, skip) - r) / h;
+    }
+    const Eigen::MatrixXd jtj = jac.transpose() * jac;
+    const Eigen::VectorXd g = jac.transpose() * r;
+    bool improved = false;
+    for (int tries = 0; tries < 12; ++tries) {
+      Eigen::MatrixXd aug = jtj;
+      aug.diagonal() += lambda * jtj.diagonal().cwiseMax(1e-30);
+      const Eigen::VectorXd step = -aug.ldlt().solve(g);
+      const Eigen::VectorXd tn = th + step;
+      const Eigen::VectorXd rn = prob.residual(tn, skip);
+      const double cn = rn.squaredNorm();
+      if (std::isfinite(cn) && cn < cost) {
+        const double rel = (cost - cn) / std::max(cost, 1e-300);
+        th = tn;
+        r = rn;
+        cost = cn;
+        lambda = std::max(lambda / 10.0, 1e-12);
+        improved = true;
+        if (rel < 1e-12 || step.norm() < 1e-10 * (1.0 + th.norm())) {
+          out.converged = true;
+        }
+        break;
+      }
+      lambda *= 10.0;
+    }
+    if (!improved) {
+      out.converged = true;  // no descent direction left: at a minimum
+      break;
+    }
+    if (out.converged) break;
+  }
+  out.theta = th;
+  out.res = r;
+  out.jac = jac;
+  return out;
+}
+
+}  // namespace
+
+ImpedanceEstimate fit_output_error(std::span<const OeWindow> windows, const OeSettings& s) {
+  if (windows.empty()) throw std::invalid_argument("output-error fit: no perturbed trials");
+  const OeProblem prob(windows, s.poly_order);
+  Eigen::VectorXd th0(7);
+  th0 << 10.0, 0.0, 0.0, 10.0, 200.0, 0.0, 200.0;  // a generic arm; LM moves far from it
+  const auto fit = levenberg_marquardt(prob, th0, -1, s.max_iterations);
+  ImpedanceEstimate e;
+  Mat2 d, k;
+  OeProblem::unpack(fit.theta, d, k);
+  e.d_nspm = d;
+  e.k_npm = k;
+  Mat2 mean = Mat2::Zero();
+  for (const auto& w : windows) mean += w.m_bsp_kg;
+  e.m_kg = mean / static_cast<double>(windows.size());
+  e.iterations = fit.iterations;
+  const auto npoly = static_cast<Eigen::Index>(2 * (s.poly_order + 1) * static_cast<int>(windows.size()));
+  const double dof = static_cast<double>(prob.rows - 7 - npoly);
+  const double sigma2 = fit.res.squaredNorm() / std::max(1.0, dof);
+  Eigen::VectorXd se(7);
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(fit.jac, Eigen::ComputeThinV);
+  {
+    Eigen::VectorXd inv = svd.singularValues().array().square().inverse().matrix();
+    se = ((svd.matrixV() * inv.asDiagonal() * svd.matrixV().transpose()) * sigma2).diagonal().cwiseSqrt();
+  }
+  e.se_kind = "least-squares (Gauss-Newton)";
+  e.ci_factor = 1.96;
+  const int n = static_cast<int>(windows.size());
+  if (s.jackknife && n >= 3) {
+    // Delete-one-trial jackknife: residuals within a trial are strongly
+    // correlated (unmodelled movement, motor noise), so the least-squares SE
+    // understates the error; trials are the independent units.
+    std::vector<Eigen::VectorXd> loo;
+    for (int i = 0; i < n; ++i) loo.push_back(levenberg_marquardt(prob, fit.theta, i, s.max_iterations).theta);
+    Eigen::VectorXd mean_t = Eigen::VectorXd::Zero(7);
+    for (const auto& t : loo) mean_t += t;
+    mean_t /= n;
+    Eigen::VectorXd var = Eigen::VectorXd::Zero(7);
+    for (const auto& t : loo) var += (t - mean_t).array().square().matrix();
+    se = (var * (static_cast<double>(n - 1) / n)).cwiseSqrt();
+    e.se_kind = "jackknife over trials";
+    e.ci_factor = t_quantile_975(n - 1);
+  }
+  e.d_se << se(0), se(1), se(2), se(3);
+  e.k_se << se(4), se(5), se(5), se(6);
+  e.residual_rms = std::sqrt(fit.res.squaredNorm() / static_cast<double>(prob.rows));
+  double var_y = 0.0;
+  for (const auto& y : prob.y_perp) var_y += y.squaredNorm();
+  e.vaf = var_y > 0 ? 1.0 - fit.res.squaredNorm() / var_y : 0.0;
+  e.condition = column_normalised_condition(fit.jac);
+  e.n_samples = static_cast<int>(prob.rows / 2);
+  e.n_params = 7;
+  e.n_trials = n;
+  flag_identifiability(e);
+  if (!fit.converged) {
+    e.identifiable = false;
+    if (e.flag.empty()) e.flag = "output-error fit did not converge in " + std::to_string(fit.iterations) + " iterations";
+  }
+  return e;
+}
+
+}  // namespace manip::estimation

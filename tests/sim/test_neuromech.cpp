@@ -1,0 +1,589 @@
+// Tests of the neuromechanical arm (include/manip/sim/neuromech_arm.hpp).
+#include <catch2/catch.hpp>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <new>
+#include <numbers>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "fixtures.hpp"
+#include "manip/common/perturbation.hpp"
+#include "manip/sim/min_jerk.hpp"
+#include "manip/sim/neuromech_arm.hpp"
+
+// ---- allocation counter ------------------------------------------------------
+// Replaces the global allocation functions of this test executable only; they
+// count and forward to malloc, so the RT claim "never allocates" can be checked.
+namespace {
+std::atomic<long> g_allocations{0};
+void* counted_alloc(std::size_t n) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  return std::malloc(n == 0 ? 1 : n);
+}
+void* counted_aligned_alloc(std::size_t n, std::align_val_t al) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  const auto a = static_cast<std::size_t>(al);
+  return std::aligned_alloc(a, ((n == 0 ? 1 : n) + a - 1) / a * a);
+}
+}  // namespace
+
+void* operator new(std::size_t n) {
+  if (void* p = counted_alloc(n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n) {
+  if (void* p = counted_alloc(n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return counted_alloc(n); }
+void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return counted_alloc(n); }
+void* operator new(std::size_t n, std::align_val_t al) {
+  if (void* p = counted_aligned_alloc(n, al)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n, std::align_val_t al) {
+  if (void* p = counted_aligned_alloc(n, al)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept {
+  return counted_aligned_alloc(n, al);
+}
+void* operator new[](std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept {
+  return counted_aligned_alloc(n, al);
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
+void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
+
+using namespace manip;
+using namespace manip::sim;
+
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+const std::string kConfig = std::string(MANIP_SOURCE_DIR) + "/config/arm_model.yaml";
+
+// The ideal admittance of eq. 19-20 with the hand on the handle:
+// (M_x + M_adm + M_handle) xdd = h - D_adm xd + u_pert.
+struct TestPlant {
+  Mat2 m_adm_kg{Mat2::Identity() * 5.0};
+  Mat2 d_adm_nspm{Mat2::Identity() * 15.0};
+  Mat2 m_handle_kg{Mat2::Identity() * 0.3};
+};
+
+Vec2 plant_step(HumanModel& human, const TestPlant& p, const Vec2& u_pert_n, double dt_s) {
+  Mat2 m_x;
+  Vec2 h;
+  human.endpoint_dynamics(m_x, h);
+  const Vec2 xdd = (m_x + p.m_adm_kg + p.m_handle_kg).inverse() * (h - p.d_adm_nspm * human.hand_velocity_mps() + u_pert_n);
+  human.advance(dt_s, xdd);
+  return xdd;
+}
+
+struct Trial {
+  std::vector<Vec2> x;    // hand, per plant sample (before the step)
+  std::vector<Vec2> plan;  // planned hand position, same samples
+  long onset{-1};          // sample at which the perturbation started
+};
+
+// One reach on the test plant at fs with the perturbation triggered when the hand
+// first crosses x2 = 0.40 m (paper §4.2). amplitude 0 = unperturbed.
+Trial run_trial(NeuromechanicalArm& arm, const ReachSpec& reach, std::uint64_t seed, double amplitude_n,
+                double angle_rad, double fs_hz = 4000.0, double extra_s = 0.5) {
+  const TestPlant plant;
+  PerturbationProfile prof;
+  prof.amplitude_n = amplitude_n;
+  arm.begin_trial(reach, seed);
+  const double dt = 1.0 / fs_hz;
+  const auto n = static_cast<long>(std::ceil((reach.t_start_s + reach.duration_s + extra_s) * fs_hz));
+  Trial out;
+  out.x.reserve(static_cast<std::size_t>(n));
+  out.plan.reserve(static_cast<std::size_t>(n));
+  for (long k = 0; k < n; ++k) {
+    const Vec2 x = arm.hand_position_m();
+    if (out.onset < 0 && x.y() >= 0.40) out.onset = k;
+    out.x.push_back(x);
+    out.plan.push_back(arm.planned_hand_position_m());
+    const Vec2 u = out.onset >= 0 ? prof.force_n(static_cast<double>(k - out.onset) * dt, angle_rad) : Vec2::Zero();
+    plant_step(arm, plant, u, dt);
+  }
+  return out;
+}
+
+// Max |dx1|, |dx2| of perturbed - twin over [onset, onset + window].
+Vec2 max_deviation(const Trial& pert, const Trial& twin, double fs_hz = 4000.0, double window_s = 0.15) {
+  Vec2 m = Vec2::Zero();
+  const auto n = static_cast<long>(std::lround(window_s * fs_hz));
+  for (long k = pert.onset; k <= pert.onset + n; ++k) {
+    const Vec2 d = pert.x[static_cast<std::size_t>(k)] - twin.x[static_cast<std::size_t>(k)];
+    m = m.cwiseMax(d.cwiseAbs());
+  }
+  return m;
+}
+
+NeuromechParams quiet(NeuromechParams p) {  // no noise
+  p.noise_cv = 0.0;
+  p.noise_floor_n = 0.0;
+  return p;
+}
+
+NeuromechParams passive() {  // no muscles, no feedback, no noise: a free two-link arm
+  NeuromechParams p = quiet(NeuromechParams{});
+  p.k0_npm.setZero();
+  p.k1_per_m.setZero();
+  p.tonic_activation_n.setZero();
+  p.feedforward_enabled = false;
+  p.disable_feedback();
+  return p;
+}
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Writes the shipped config with `from` replaced by `to` and returns the loader's message.
+std::string load_error(const std::string& from, const std::string& to) {
+  std::string text = read_text(kConfig);
+  const auto pos = text.find(from);
+  REQUIRE(pos != std::string::npos);
+  text.replace(pos, from.size(), to);
+  const std::string path = testutil::temp_dir("neuromech_cfg") + "/arm.yaml";
+  std::ofstream(path) << text;
+  try {
+    (void)load_neuromech_params(path);
+  } catch (const std::runtime_error& e) {
+    const std::string msg = e.what();
+    CHECK(msg.find('\n') == std::string::npos);  // one line
+    CHECK(msg.rfind(path, 0) == 0);               // starts with the file name
+    return msg;
+  }
+  FAIL("no error for " << to);
+  return {};
+}
+
+Vec2 u_ext(const NeuromechanicalArm& arm, const Vec2& x, const Vec2& xd) {  // M_x xdd* - h at (x, xd)
+  Mat2 m_x;
+  Vec2 h;
+  arm.endpoint_dynamics_at(x, xd, m_x, h);
+  return m_x * arm.last_hand_acceleration_mps2() - h;
+}
+
+// Central differences of u_ext = M_x(x) xdd* - h(x, xd) w.r.t. hand position and velocity.
+void fd_impedance(const NeuromechanicalArm& arm, Mat2& d_fd, Mat2& k_fd) {
+  const Vec2 x = arm.hand_position_m(), xd = arm.hand_velocity_mps();
+  const double ex = 1e-6, ev = 1e-6;
+  for (int j = 0; j < 2; ++j) {
+    const Vec2 dx = Vec2::Unit(j) * ex, dv = Vec2::Unit(j) * ev;
+    k_fd.col(j) = (u_ext(arm, x + dx, xd) - u_ext(arm, x - dx, xd)) / (2 * ex);
+    d_fd.col(j) = (u_ext(arm, x, xd + dv) - u_ext(arm, x, xd - dv)) / (2 * ev);
+  }
+}
+
+Eigen::Vector2d sym_eig(const Mat2& m) {
+  return Eigen::SelfAdjointEigenSolver<Mat2>(0.5 * (m + m.transpose())).eigenvalues();
+}
+
+}  // namespace
+
+TEST_CASE("neuromech: the shipped config loads, equals the built-in defaults and round-trips") {
+  const NeuromechParams p = load_neuromech_params(kConfig);
+  CHECK(p == NeuromechParams{});
+  CHECK_FALSE(p.invalid_reason());
+  const std::string path = testutil::temp_dir("neuromech_rt") + "/arm.yaml";
+  NeuromechParams q = p;
+  q.tonic_activation_n(3) = 12.345678901234567;
+  q.pathway(Pathway::kVoluntary).enabled = true;
+  std::ofstream(path) << neuromech_params_to_yaml(q);
+  CHECK(load_neuromech_params(path) == q);
+}
+
+TEST_CASE("neuromech: invalid config values and keys are rejected with file, key and reason") {
+  using Catch::Matchers::Contains;
+  CHECK_THAT(load_error("mass_kg: 1.93", "mass_kg: -1.93"), Contains("anthropometrics.upper_arm.mass_kg"));
+  CHECK_THAT(load_error("inertia_kgm2: 0.0188", "inertia_kgm2: 0.0"), Contains("anthropometrics.forearm.inertia_kgm2"));
+  CHECK_THAT(load_error("delay_s: 0.060", "delay_s: 0.0601"),
+             Contains("feedback.long_latency.delay_s") && Contains("whole number of simulation steps"));
+  CHECK_THAT(load_error("long_latency:  {enabled: true,  delay_s: 0.060", "long_latency:  {enabled: true,  delay_s: 0.0"),
+             Contains("feedback.long_latency.delay_s") && Contains("at least one simulation step"));
+  CHECK_THAT(load_error("  tau_s: 0.05", "  tau_s: 0.05\n  sigma: 1.0"), Contains("noise.sigma") && Contains("unknown key"));
+  CHECK_THAT(load_error("  floor_n: 0.0\n", ""), Contains("noise.floor_n") && Contains("missing"));
+  CHECK_THAT(load_error("step_s: 6.25e-05", "step_s: fast"), Contains("integration.step_s") && Contains("not a number"));
+  CHECK_THAT(load_error("k1_per_m: [75.0, 75.0, 75.0, 75.0, 75.0, 75.0]", "k1_per_m: [75.0, 75.0]"),
+             Contains("muscles.k1_per_m") && Contains("list of 6"));
+  CHECK_THAT(load_error("k0_npm:   [810.8,", "k0_npm:   [-810.8,"), Contains("muscles.k0_npm") && Contains("shoulder_flexor"));
+  CHECK_THAT(load_error("shoulder: [0.0536, -0.0536, 0.0,    0.0,    0.0386, -0.0388]",
+                        "shoulder: [0.0536, 0.0536, 0.0,    0.0,    0.0386, 0.0388]\n    elbow:    [0.0,    0.0,     0.0316, 0.0267, 0.0427, 0.0300]\n    unused:"),
+             Contains("muscles.moment_arms_m"));
+  CHECK_THAT(load_error("stiffness_to_damping_per_s: 12.0", "stiffness_to_damping_per_s: 0"),
+             Contains("muscles.stiffness_to_damping_per_s"));
+  CHECK_THAT(load_error("kd_nspm: 300.0", "kd_nspm: -1"), Contains("feedback.voluntary.kd_nspm"));
+  CHECK_THAT(load_error("enabled: true\n  load_mass_kg", "enabled: maybe\n  load_mass_kg"),
+             Contains("feedforward.enabled"));
+
+  // Moment arms whose columns all lie in one half-plane cannot produce every torque.
+  NeuromechParams p;
+  p.moment_arms_m.row(0) = p.moment_arms_m.row(0).cwiseAbs();
+  p.moment_arms_m.row(1) = p.moment_arms_m.row(1).cwiseAbs();
+  REQUIRE(p.invalid_reason());
+  CHECK_THAT(*p.invalid_reason(), Contains("muscles.moment_arms_m"));
+  CHECK_THROWS_AS(NeuromechanicalArm(p), std::invalid_argument);
+}
+
+TEST_CASE("neuromech: the passive arm conserves kinetic energy under its integrator") {
+  // Free motion (no muscles, u_ext = 0): only velocity-product forces, which do no
+  // work, so E = 1/2 qd^T M_q qd is constant. Semi-implicit Euler is first order:
+  // the energy error oscillates with amplitude O(step) and does not grow secularly.
+  // Accepted: max |E - E0| / E0 < 2e-4 over 4 s at 16 kHz for a brisk movement
+  // (shoulder 1.5 rad/s, elbow -2.5 rad/s: faster than any reach of the protocol),
+  // and the error halves with the step (first order, not a drift of the model).
+  const auto max_rel_drift = [](double step_s) {
+    NeuromechParams p = passive();
+    p.step_s = step_s;
+    NeuromechanicalArm arm(p);
+    JointState s;
+    s.q_rad = Vec2(0.7, 1.6);
+    s.qd_radps = Vec2(1.5, -2.5);
+    arm.set_joint_state(s);
+    const double e0 = arm.kinetic_energy_j();
+    double worst = 0.0, q2_min = 10.0, q2_max = -10.0;
+    const auto n = static_cast<long>(std::lround(4.0 / step_s));
+    for (long k = 0; k < n; ++k) {
+      Mat2 m_x;
+      Vec2 h;
+      arm.endpoint_dynamics(m_x, h);
+      arm.advance(step_s, m_x.inverse() * h);
+      worst = std::max(worst, std::abs(arm.kinetic_energy_j() - e0) / e0);
+      q2_min = std::min(q2_min, arm.joint_state().q_rad(1));
+      q2_max = std::max(q2_max, arm.joint_state().q_rad(1));
+    }
+    REQUIRE(q2_min > 0.2);  // stayed clear of the straight-arm singularity
+    REQUIRE(q2_max < 3.0);
+    return worst;
+  };
+  const double d16 = max_rel_drift(1.0 / 16000.0);
+  const double d32 = max_rel_drift(1.0 / 32000.0);
+  INFO("relative energy error 16 kHz " << d16 << ", 32 kHz " << d32);
+  CHECK(d16 < 2e-4);
+  CHECK(d32 < 0.6 * d16);
+}
+
+TEST_CASE("neuromech: inverse then forward dynamics reproduces the minimum-jerk plan") {
+  // Feed-forward only (no feedback, no noise) on the ideal admittance the
+  // feed-forward expects. Open loop (no muscle impedance) the only error is the
+  // integrator's; with the intrinsic impedance it is corrected towards the plan.
+  for (const bool intrinsic : {false, true}) {
+    NeuromechParams p = quiet(NeuromechParams{});
+    p.disable_feedback();
+    if (!intrinsic) {
+      p.k0_npm.setZero();
+      p.k1_per_m.setZero();
+    }
+    NeuromechanicalArm arm(p);
+    for (const double duration : {3.0, 0.8}) {
+      ReachSpec r;
+      r.duration_s = duration;
+      r.lateral_bow_m = 0.01;
+      const Trial t = run_trial(arm, r, 7, 0.0, 0.0);
+      double worst = 0.0;
+      for (std::size_t k = 0; k < t.x.size(); ++k) {
+        const auto s = min_jerk(r.start_shoulder_m, r.goal_shoulder_m, r.t_start_s, r.duration_s, r.lateral_bow_m,
+                                static_cast<double>(k) / 4000.0);
+        worst = std::max(worst, (t.x[k] - s.x).norm());
+      }
+      INFO("intrinsic " << intrinsic << " duration " << duration << " s: max |x - x_plan| = " << worst << " m");
+      CHECK(worst < 2e-5);
+      CHECK((t.x.back() - r.goal_shoulder_m).norm() < 2e-5);
+    }
+  }
+}
+
+TEST_CASE("neuromech: a zero-amplitude perturbation gives identical paired runs; runs are deterministic per seed") {
+  NeuromechanicalArm arm(NeuromechParams{});  // the paper's configuration, with noise
+  ReachSpec r;
+  r.lateral_bow_m = 0.004;
+  const Trial twin = run_trial(arm, r, 42, 0.0, 30 * kDeg);
+  const Trial zero = run_trial(arm, r, 42, 0.0 * 15.0, 30 * kDeg);
+  const Trial again = run_trial(arm, r, 42, 0.0, 30 * kDeg);
+  const Trial other = run_trial(arm, r, 43, 0.0, 30 * kDeg);
+  REQUIRE(twin.x.size() == zero.x.size());
+  bool same_zero = true, same_again = true;
+  double diff_other = 0.0;
+  for (std::size_t k = 0; k < twin.x.size(); ++k) {
+    same_zero = same_zero && twin.x[k] == zero.x[k];
+    same_again = same_again && twin.x[k] == again.x[k];
+    diff_other = std::max(diff_other, (twin.x[k] - other.x[k]).norm());
+  }
+  CHECK(same_zero);
+  CHECK(same_again);
+  CHECK(diff_other > 1e-5);  // another seed is another noise realisation
+
+  // A real perturbation leaves the run identical up to the onset.
+  const Trial pert = run_trial(arm, r, 42, 15.0, 30 * kDeg);
+  REQUIRE(pert.onset == twin.onset);
+  bool same_before = true;
+  for (long k = 0; k <= pert.onset; ++k) same_before = same_before && pert.x[static_cast<std::size_t>(k)] == twin.x[static_cast<std::size_t>(k)];
+  CHECK(same_before);
+  CHECK(pert.x[static_cast<std::size_t>(pert.onset + 200)] != twin.x[static_cast<std::size_t>(pert.onset + 200)]);
+}
+
+TEST_CASE("neuromech: begin_trial, endpoint_dynamics, advance and the truth functions never allocate") {
+  NeuromechParams p;
+  for (auto& f : p.feedback) f.enabled = true;  // largest delay line in use
+  NeuromechanicalArm arm(p);
+  const TestPlant plant;
+  PerturbationProfile prof;
+  ReachSpec r;
+  r.lateral_bow_m = 0.005;
+  const long before = g_allocations.load();
+  Mat2 d, k;
+  for (std::uint64_t trial = 0; trial < 3; ++trial) {
+    arm.begin_trial(r, trial);
+    for (int n = 0; n < 8000; ++n) {
+      plant_step(arm, plant, prof.force_n((n - 6000) / 4000.0, 1.0), 0.25e-3);
+      arm.endpoint_impedance(d, k);
+      arm.endpoint_impedance_eq16_18(d, k);
+      arm.reflex_endpoint_gains(Pathway::kShortLatency, d, k);
+    }
+  }
+  const long after = g_allocations.load();
+  CHECK(after - before == 0);
+  // The counter works: a std::vector allocates.
+  std::vector<int> v(3);
+  CHECK(g_allocations.load() > after);
+}
+
+TEST_CASE("neuromech: endpoint_impedance is the linearisation of the endpoint dynamics (finite differences)") {
+  const auto check_state = [](const NeuromechanicalArm& arm, const char* what) {
+    Mat2 d, k, d_fd, k_fd, d_s, k_s;
+    arm.endpoint_impedance(d, k);
+    arm.endpoint_impedance_eq16_18(d_s, k_s);
+    fd_impedance(arm, d_fd, k_fd);
+    INFO(what << "\nK full\n" << k << "\nK fd\n" << k_fd << "\nK eq.18\n" << k_s << "\nD full\n" << d << "\nD fd\n" << d_fd
+              << "\nD eq.17\n" << d_s);
+    // Every muscle taut: the tension clamp has no kink at this state.
+    REQUIRE(arm.tensions_n().minCoeff() > 1.0);
+    CHECK((k - k_fd).norm() < 1e-5 * k.norm());
+    CHECK((d - d_fd).norm() < 1e-5 * d.norm());
+    return std::pair{(k - k_s).norm(), (d - d_s).norm()};
+  };
+
+  // (a) Mid-reach, 80 ms into a 15 N perturbation, reflexes and noise on: off the plan.
+  NeuromechParams p;
+  for (auto& f : p.feedback) f.enabled = true;
+  NeuromechanicalArm arm(p);
+  const TestPlant plant;
+  PerturbationProfile prof;
+  ReachSpec r;
+  arm.begin_trial(r, 3);
+  long onset = -1;
+  for (long n = 0;; ++n) {
+    if (onset < 0 && arm.hand_position_m().y() >= 0.40) onset = n;
+    if (onset >= 0 && n - onset == 320) break;
+    plant_step(arm, plant, onset >= 0 ? prof.force_n((n - onset) / 4000.0, 60 * kDeg) : Vec2::Zero(), 0.25e-3);
+  }
+  const auto [dk_a, dd_a] = check_state(arm, "perturbed reach");
+  CHECK(dk_a > 1e-3);  // the geometric terms are resolved by the test
+
+  // (b) A brisk artificial state with a large imposed acceleration: the terms the
+  // paper drops (dC/dq, dM/dq qdd, d(J^T)/dq u, the kinematic chain) are large.
+  JointState s;
+  s.q_rad = Vec2(0.6, 1.4);
+  s.qd_radps = Vec2(1.2, -1.8);
+  arm.set_joint_state(s);
+  arm.advance(arm.params().step_s, Vec2(4.0, -3.0));
+  const auto [dk_b, dd_b] = check_state(arm, "brisk state");
+  CHECK(dk_b > 10.0);
+  CHECK(dd_b > 1.0);
+}
+
+TEST_CASE("neuromech: intrinsic endpoint impedance at mid-reach lies in the literature ranges") {
+  // Intrinsic only (all pathways off), unperturbed, x = (0, 0.40) m on the way out.
+  // Ranges during movement: stiffness ~100-400 N/m, damping ~5-20 N s/m.
+  NeuromechParams p = quiet(NeuromechParams{});
+  p.disable_feedback();
+  NeuromechanicalArm arm(p);
+  const TestPlant plant;
+  arm.begin_trial(ReachSpec{}, 1);
+  while (arm.hand_position_m().y() < 0.40) plant_step(arm, plant, Vec2::Zero(), 0.25e-3);
+  Mat2 d, k, d_s, k_s;
+  arm.endpoint_impedance(d, k);
+  arm.endpoint_impedance_eq16_18(d_s, k_s);
+  INFO("K\n" << k << "\nD\n" << d << "\nK eq.18\n" << k_s << "\nD eq.17\n" << d_s);
+  for (const Mat2& kk : {k, k_s}) {
+    const auto e = sym_eig(kk);
+    CHECK(e(0) >= 100.0);
+    CHECK(e(1) <= 400.0);
+  }
+  for (const Mat2& dd : {d, d_s}) {
+    const auto e = sym_eig(dd);
+    CHECK(e(0) >= 5.0);
+    CHECK(e(1) <= 20.0);
+  }
+  // The stiffness is nearly symmetric (intrinsic, spring-like; paper §3.3).
+  CHECK(std::abs(k(0, 1) - k(1, 0)) < 0.1 * k.norm());
+}
+
+TEST_CASE("neuromech: a 15 N pulse deviates the hand by millimetres and every feedback configuration settles") {
+  struct Config {
+    const char* name;
+    bool s, l, v;
+  };
+  for (const Config c : {Config{"intrinsic", false, false, false}, Config{"paper 60 ms", false, true, false},
+                         Config{"short-latency", true, false, false}, Config{"all pathways", true, true, true}}) {
+    NeuromechParams p = quiet(NeuromechParams{});
+    p.pathway(Pathway::kShortLatency).enabled = c.s;
+    p.pathway(Pathway::kLongLatency).enabled = c.l;
+    p.pathway(Pathway::kVoluntary).enabled = c.v;
+    NeuromechanicalArm arm(p);
+    ReachSpec r;
+    for (const double angle : {30.0, 150.0, 240.0, 330.0}) {
+      const Trial twin = run_trial(arm, r, 5, 0.0, angle * kDeg, 4000.0, 1.0);
+      const Trial pert = run_trial(arm, r, 5, 15.0, angle * kDeg, 4000.0, 1.0);
+      const Vec2 dev = max_deviation(pert, twin);
+      INFO(c.name << " angle " << angle << ": max deviation " << dev.transpose() * 1e3 << " mm");
+      CHECK(dev.maxCoeff() > 1e-3);
+      CHECK(dev.maxCoeff() < 15e-3);
+      // Back at the goal, at rest, 1 s after the plan ended.
+      CHECK((pert.x.back() - r.goal_shoulder_m).norm() < 2e-3);
+      CHECK((pert.x.back() - pert.x[pert.x.size() - 41]).norm() < 1e-5);
+    }
+  }
+}
+
+TEST_CASE("neuromech: a delayed pathway changes nothing before its delay has elapsed") {
+  // Perturbed minus twin with and without the 60 ms long-latency pathway: equal
+  // (up to the pathway's response to the twin's own tiny tracking error) until the
+  // delay has elapsed, different afterwards.
+  ReachSpec r;
+  NeuromechParams pi = quiet(NeuromechParams{});
+  pi.disable_feedback();
+  NeuromechParams pl = pi;
+  pl.pathway(Pathway::kLongLatency).enabled = true;
+  NeuromechanicalArm a_i(pi), a_l(pl);
+  const Trial ti = run_trial(a_i, r, 1, 0.0, 60 * kDeg), pi_ = run_trial(a_i, r, 1, 15.0, 60 * kDeg);
+  const Trial tl = run_trial(a_l, r, 1, 0.0, 60 * kDeg), pl_ = run_trial(a_l, r, 1, 15.0, 60 * kDeg);
+  REQUIRE(pi_.onset == pl_.onset);
+  const auto dev = [](const Trial& p, const Trial& t, long k) {
+    return Vec2(p.x[static_cast<std::size_t>(k)] - t.x[static_cast<std::size_t>(k)]);
+  };
+  double before = 0.0, after = 0.0;
+  for (long k = pi_.onset; k < pi_.onset + 600; ++k) {
+    const double d = (dev(pi_, ti, k) - dev(pl_, tl, k)).norm();
+    if (k <= pi_.onset + 240) before = std::max(before, d);  // 60 ms at 4 kHz (+1 sample of response)
+    else after = std::max(after, d);
+  }
+  INFO("difference before the delay " << before << " m, after " << after << " m");
+  CHECK(before < 1e-9);
+  CHECK(after > 1e-4);
+}
+
+TEST_CASE("neuromech: advance rejects a step that is not a whole multiple of the integration step") {
+  NeuromechanicalArm arm(NeuromechParams{});
+  CHECK_THROWS_AS(arm.advance(1.5 * arm.params().step_s, Vec2::Zero()), std::invalid_argument);
+  CHECK_NOTHROW(arm.advance(4 * arm.params().step_s, Vec2::Zero()));
+  CHECK(arm.time_s() == Approx(4 * arm.params().step_s));
+  ReachSpec far;
+  far.goal_shoulder_m = Vec2(0.0, 0.9);
+  CHECK_THROWS_AS(arm.begin_trial(far, 1), std::invalid_argument);
+}
+
+// Figures for the report (not a pass/fail test): run with `test_sim "[report]"`.
+TEST_CASE("neuromech: report figures", "[.][report]") {
+  // Max deviations under the 15 N pulse, paper configuration, with and without noise.
+  for (const bool noise : {false, true}) {
+    NeuromechParams p = noise ? NeuromechParams{} : quiet(NeuromechParams{});
+    NeuromechanicalArm arm(p);
+    std::vector<double> d1, d2;
+    int seed = 0;
+    for (const double angle : {30.0, 60.0, 120.0, 150.0, 210.0, 240.0, 300.0, 330.0}) {
+      ReachSpec r;
+      const Trial twin = run_trial(arm, r, static_cast<std::uint64_t>(++seed), 0.0, angle * kDeg);
+      const Trial pert = run_trial(arm, r, static_cast<std::uint64_t>(seed), 15.0, angle * kDeg);
+      const Vec2 dev = max_deviation(pert, twin);
+      d1.push_back(dev(0) * 1e3);
+      d2.push_back(dev(1) * 1e3);
+      std::printf("paper config, noise %d, angle %5.0f: max dev x1 %.2f mm x2 %.2f mm\n", noise, angle, dev(0) * 1e3,
+                  dev(1) * 1e3);
+    }
+    const auto ms = [](const std::vector<double>& v) {
+      double m = 0, s = 0;
+      for (double x : v) m += x;
+      m /= static_cast<double>(v.size());
+      for (double x : v) s += (x - m) * (x - m);
+      return std::pair{m, std::sqrt(s / static_cast<double>(v.size() - 1))};
+    };
+    const auto [m1, s1] = ms(d1);
+    const auto [m2, s2] = ms(d2);
+    std::printf("paper config, noise %d: mean (std) max dev x1 %.2f (%.2f) mm, x2 %.2f (%.2f) mm\n", noise, m1, s1, m2, s2);
+  }
+  // Tracking error of the unperturbed reach with noise (paper configuration).
+  {
+    NeuromechanicalArm arm(NeuromechParams{});
+    double worst = 0.0, end = 0.0;
+    for (std::uint64_t seed = 1; seed <= 10; ++seed) {
+      const Trial t = run_trial(arm, ReachSpec{}, seed, 0.0, 0.0);
+      for (std::size_t k = 0; k < t.x.size(); ++k) worst = std::max(worst, (t.x[k] - t.plan[k]).norm());
+      end = std::max(end, (t.x.back() - t.plan.back()).norm());
+    }
+    std::printf("paper config with noise, 10 reaches: max |x - plan| %.3f mm, at the end %.3f mm\n", worst * 1e3,
+                end * 1e3);
+  }
+  // Endpoint impedance at mid-reach (x2 = 0.40 m), intrinsic only, and the reflex gains.
+  {
+    NeuromechParams p = quiet(NeuromechParams{});
+    for (auto& f : p.feedback) f.enabled = true;
+    NeuromechanicalArm arm(p);
+    arm.begin_trial(ReachSpec{}, 1);
+    const TestPlant plant;
+    while (arm.hand_position_m().y() < 0.40) plant_step(arm, plant, Vec2::Zero(), 0.25e-3);
+    Mat2 d, k, d_s, k_s;
+    arm.endpoint_impedance(d, k);
+    arm.endpoint_impedance_eq16_18(d_s, k_s);
+    const auto pr = [](const char* what, const Mat2& m) {
+      const auto e = sym_eig(m);
+      std::printf("%-28s [[%8.2f %8.2f] [%8.2f %8.2f]]  sym eig %.1f %.1f\n", what, m(0, 0), m(0, 1), m(1, 0), m(1, 1),
+                  e(0), e(1));
+    };
+    std::printf("at x = (%.3f, %.3f) m, t = %.3f s, M_x:\n", arm.hand_position_m()(0), arm.hand_position_m()(1),
+                arm.time_s());
+    Mat2 m_x;
+    Vec2 h;
+    arm.endpoint_dynamics(m_x, h);
+    pr("M_x [kg]", m_x);
+    pr("K full [N/m]", k);
+    pr("K eq.18 [N/m]", k_s);
+    pr("D full [Ns/m]", d);
+    pr("D eq.17 [Ns/m]", d_s);
+    for (int i = 0; i < kPathways; ++i) {
+      arm.reflex_endpoint_gains(static_cast<Pathway>(i), d, k);
+      std::printf("%s (%.0f ms):\n", pathway_name(static_cast<Pathway>(i)), p.feedback[static_cast<std::size_t>(i)].delay_s * 1e3);
+      pr("  K reflex [N/m]", k);
+      pr("  D reflex [Ns/m]", d);
+    }
+    std::printf("activations [N]: %s\n", [&] {
+      std::ostringstream s;
+      s << arm.activations_n().transpose();
+      return s.str();
+    }().c_str());
+  }
+}
