@@ -34,7 +34,7 @@ Reject validate_command(const manip::command_t& c, const CommandLimits& lim) {
   if (!s.allFinite() || !g.allFinite()) return Reject::kNotFinite;
   for (const Vec2& t : {s, g}) {
     const Vec2 w = lim.frame.point_to_workspace(t);
-    if (std::abs(w.x()) + lim.target_radius_m > lim.wall_start_m || std::abs(w.y()) + lim.target_radius_m > lim.wall_start_m)
+    if (std::abs(w.x()) + lim.target_radius_m > lim.wall_start_m + 1e-9 || std::abs(w.y()) + lim.target_radius_m > lim.wall_start_m + 1e-9)
       return Reject::kOutOfWorkspace;
   }
   if ((g - s).norm() < 2.0 * lim.target_radius_m) return Reject::kTargetsTooClose;

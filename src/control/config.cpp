@@ -55,6 +55,12 @@ class Section {
     return n;
   }
 
+  bool has(const std::string& key) {
+    known_.insert(key);
+    const YAML::Node n = node_[key];
+    return n.IsDefined() && !n.IsNull();
+  }
+
   Section sub(const std::string& key) { return Section(file_, get(key), full(key)); }
 
   double number(const std::string& key, const std::function<bool(double)>& ok, const char* rule) {
@@ -307,7 +313,7 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
     auto s = top.sub("protocol");
     auto& p = c.protocol;
     p.movements = static_cast<int>(s.integer("movements", 1, 100000));
-    if (s.get("perturbed_trials", false).IsDefined())
+    if (s.has("perturbed_trials"))
       p.perturbed_trials = static_cast<int>(s.integer("perturbed_trials", 0, 100000));
     else
       p.perturbed_trials = -1;
@@ -332,8 +338,8 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
     for (const auto* key : {"start_shoulder_m", "goal_shoulder_m"}) {
       const Vec2 t = std::string(key) == "start_shoulder_m" ? p.start_shoulder_m : p.goal_shoulder_m;
       const Vec2 w = c.frames.point_to_workspace(t);
-      if (std::abs(w.x()) + p.target_radius_m > c.safety.wall_start_m ||
-          std::abs(w.y()) + p.target_radius_m > c.safety.wall_start_m)
+      if (std::abs(w.x()) + p.target_radius_m > c.safety.wall_start_m + 1e-9 ||
+          std::abs(w.y()) + p.target_radius_m > c.safety.wall_start_m + 1e-9)
         s.fail(key, "target (with its radius) lies outside the virtual walls of the workspace (workspace frame: " +
                         std::to_string(w.x()) + ", " + std::to_string(w.y()) + " m)");
     }

@@ -1,6 +1,7 @@
 #pragma once
 // Small value types shared by every module. SI units throughout.
-#include <Eigen/Core>
+// Dense (not Core): 2x2 inverse/determinant/ldlt are used everywhere.
+#include <Eigen/Dense>
 
 namespace manip {
 

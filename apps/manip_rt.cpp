@@ -1,0 +1,117 @@
+// manip_rt: the 4 kHz admittance controller of the manipulandum (docs/controller.md).
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <ctime>
+#include <iostream>
+
+#include "manip/control/config.hpp"
+#include "manip/hardware/backend.hpp"
+#include "manip/hardware/runner.hpp"
+#include "manip/version.hpp"
+
+namespace {
+std::atomic<bool> g_interrupt{false};
+extern "C" void on_signal(int) { g_interrupt.store(true); }
+
+const char* kExitCodes =
+    "Exit codes:\n"
+    "  0    session complete, stopped by STOP_SESSION, or --duration reached\n"
+    "  1    unexpected internal error\n"
+    "  2    bad command line\n"
+    "  3    configuration invalid or unreadable (message names file, line, key, reason)\n"
+    "  4    backend unavailable or failed to start (--backend can: not implemented yet)\n"
+    "  5    --require-rt: no PREEMPT_RT kernel or no real-time privileges\n"
+    "  6    log file exists (use --force), cannot be created, or writing failed (e.g. disk full)\n"
+    "  7    session ended by a safety fault (unattended runs, --exit-on-fault)\n"
+    "  8    LCM bus cannot be created with the URL (--lcm-url none runs without it)\n"
+    "  130  interrupted (SIGINT/SIGTERM): stopped safely, log closed\n";
+}  // namespace
+
+int main(int argc, char** argv) {
+  namespace hw = manip::hardware;
+  CLI::App app{std::string("manip_rt ") + manip::kVersion +
+               ": 4 kHz admittance controller of the 2-axis manipulandum (paper §5.1-5.2)"};
+  app.footer(kExitCodes);
+  std::string backend = "sim", config = "config/rt.yaml", log, lcm_url;
+  bool realtime = false, afap = false, require_rt = false, force = false, exit_on_fault = false, quiet = false;
+  double duration = 0.0;
+  int trials = 0;
+  long long seed = -1;
+  app.add_option("--backend", backend, "sim | can (can: refused until the CANopen issue)")->capture_default_str();
+  app.add_option("--config", config, "configuration YAML")->capture_default_str();
+  app.add_option("--log", log, "LCM log file to write (default: manip_rt-<session_id>-<UTC time>.lcm)");
+  app.add_flag("--force", force, "overwrite an existing log file");
+  auto* rt = app.add_flag("--realtime", realtime, "pace the loop in real time at the sample rate (SCHED_FIFO)");
+  app.add_flag("--afap,--as-fast-as-possible", afap, "run the simulation as fast as possible (default for sim)")
+      ->excludes(rt);
+  app.add_flag("--require-rt", require_rt, "refuse to run without a PREEMPT_RT kernel and real-time privileges");
+  app.add_option("--lcm-url", lcm_url, "LCM URL for the live bus (default: bus.lcm_url; 'none' = no bus)");
+  app.add_option("--duration", duration, "stop after this many seconds of loop time (0 = whole session)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--trials", trials, "shorten the session to N movements (keeps the perturbed fraction)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--seed", seed, "override protocol.seed (recorded in the session message)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_flag("--exit-on-fault", exit_on_fault, "end the run on a safety fault (default when not paced)");
+  app.add_flag("--quiet", quiet, "no progress lines");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? 0 : hw::exit_code::kUsage;
+  }
+
+  try {
+    manip::control::ConfigOverrides ov;
+    if (!lcm_url.empty()) ov.emplace_back("bus.lcm_url", "\"" + lcm_url + "\"");
+    if (seed >= 0) ov.emplace_back("protocol.seed", std::to_string(seed));
+    manip::control::RtConfig cfg = manip::control::load_rt_config(config, ov);
+    if (trials > 0) {
+      for (auto& o : manip::control::trials_overrides(cfg, trials)) ov.push_back(o);
+      cfg = manip::control::load_rt_config(config, ov);
+    }
+
+    if (backend == "can" && !afap) realtime = true;
+    auto made = hw::make_backend(backend, cfg);
+    if (!made.backend) {
+      std::cerr << "manip_rt: " << made.error << "\n";
+      return made.exit_code;
+    }
+    if (log.empty()) {
+      char ts[32];
+      const std::time_t now = std::time(nullptr);
+      std::strftime(ts, sizeof ts, "%Y%m%dT%H%M%SZ", std::gmtime(&now));
+      log = "manip_rt-" + cfg.participant.session_id + "-" + ts + ".lcm";
+    }
+
+    std::signal(SIGINT, on_signal);
+    std::signal(SIGTERM, on_signal);
+    hw::RunOptions opt;
+    opt.log_path = log;
+    opt.overwrite_log = force;
+    opt.realtime = realtime && !afap;
+    opt.require_rt = require_rt;
+    opt.lcm_url = lcm_url;
+    opt.duration_s = duration;
+    opt.exit_on_fault = exit_on_fault;
+    opt.quiet = quiet;
+    opt.interrupt = &g_interrupt;
+    opt.source = "manip_rt/" + backend;
+    if (!quiet)
+      std::cerr << "manip_rt " << manip::kVersion << ": backend " << backend << ", "
+                << (opt.realtime ? "paced in real time" : "as fast as possible") << ", "
+                << cfg.protocol.movements << " movements (" << cfg.perturbed_count() << " perturbed), log " << log
+                << "\n";
+    const hw::RunReport rep = hw::run_session(cfg, *made.backend, opt, std::cerr);
+    if (!quiet || rep.exit_code != 0) std::cerr << rep.summary();
+    std::cerr << "manip_rt: " << rep.message << " (exit " << rep.exit_code << ")\n";
+    return rep.exit_code;
+  } catch (const manip::control::ConfigError& e) {
+    std::cerr << "manip_rt: configuration error: " << e.what() << "\n";
+    return hw::exit_code::kConfig;
+  } catch (const std::exception& e) {
+    std::cerr << "manip_rt: internal error: " << e.what() << "\n";
+    return hw::exit_code::kError;
+  }
+}

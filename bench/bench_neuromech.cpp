@@ -1,0 +1,104 @@
+// Speed of the neuromechanical arm on the ideal admittance: simulated seconds per
+// wall-clock second on one core (target >= 500x real time at 4 kHz).
+//
+//   bench_neuromech [--config config/arm_model.yaml] [--runs 7] [--trials 10]
+//
+// Each run simulates `trials` paired reaches (unperturbed twin + 15 N perturbed,
+// 4.0 s each, the paper's feedback configuration with noise) and reports the median
+// over runs of the simulated/wall ratio, for:
+//   A: plant at 4 kHz, model step 1/4 kHz (one integration step per plant step)
+//   B: plant at 4 kHz, model step 1/16 kHz (config default; 4 internal sub-steps)
+//   C: plant at 16 kHz, model step 1/16 kHz (the session runner's 4 kHz x 4 sub-steps)
+#include <CLI/CLI.hpp>
+#include <Eigen/LU>
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <numbers>
+#include <vector>
+
+#include "manip/common/perturbation.hpp"
+#include "manip/sim/neuromech_arm.hpp"
+
+using namespace manip;
+using namespace manip::sim;
+
+namespace {
+
+struct Result {
+  double sim_s{0};
+  double wall_s{0};
+  double checksum{0};  // keeps the work observable
+};
+
+Result run(const NeuromechParams& p, double plant_hz, int trials) {
+  NeuromechanicalArm arm(p);  // allocation happens here, outside the timed loop
+  const Mat2 m_load = Mat2::Identity() * 5.3, d_adm = Mat2::Identity() * 15.0;
+  const PerturbationProfile prof;
+  const double dt = 1.0 / plant_hz;
+  const ReachSpec reach;
+  const auto n = static_cast<long>(std::lround(4.0 * plant_hz));
+  Result r;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int t = 0; t < trials; ++t) {
+    for (const double amp : {0.0, 15.0}) {
+      arm.begin_trial(reach, static_cast<std::uint64_t>(t + 1));
+      long onset = -1;
+      const double angle = (30.0 + 45.0 * t) * std::numbers::pi / 180.0;
+      for (long k = 0; k < n; ++k) {
+        if (onset < 0 && arm.hand_position_m().y() >= 0.40) onset = k;
+        const Vec2 u = onset >= 0 ? Vec2(amp * prof.force_n(static_cast<double>(k - onset) * dt, angle) / 15.0)
+                                  : Vec2::Zero();
+        Mat2 m_x;
+        Vec2 h;
+        arm.endpoint_dynamics(m_x, h);
+        const Vec2 xdd = (m_x + m_load).inverse() * (h - d_adm * arm.hand_velocity_mps() + u);
+        arm.advance(dt, xdd);
+      }
+      r.checksum += arm.hand_position_m().sum();
+      r.sim_s += static_cast<double>(n) * dt;
+    }
+  }
+  r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"neuromechanical arm + ideal admittance: simulated seconds per wall-clock second"};
+  std::string config =
+      (std::filesystem::path(__FILE__).parent_path().parent_path() / "config" / "arm_model.yaml").string();
+  int runs = 7, trials = 10;
+  app.add_option("--config", config, "arm model YAML");
+  app.add_option("--runs", runs, "repetitions (median reported)");
+  app.add_option("--trials", trials, "paired trials per run");
+  CLI11_PARSE(app, argc, argv);
+
+  const NeuromechParams base = load_neuromech_params(config);
+  struct Case {
+    const char* name;
+    double step_s, plant_hz;
+  };
+  const Case cases[] = {{"A plant 4 kHz, step 1/4 kHz ", 1.0 / 4000.0, 4000.0},
+                        {"B plant 4 kHz, step 1/16 kHz", 1.0 / 16000.0, 4000.0},
+                        {"C plant 16 kHz, step 1/16 kHz", 1.0 / 16000.0, 16000.0}};
+  std::printf("config %s; %d runs x %d paired trials x 2 x 4.0 s; feedback as configured, noise on\n", config.c_str(),
+              runs, trials);
+  for (const Case& c : cases) {
+    NeuromechParams p = base;
+    p.step_s = c.step_s;
+    std::vector<double> ratio;
+    double checksum = 0.0;
+    for (int i = 0; i < runs; ++i) {
+      const Result r = run(p, c.plant_hz, trials);
+      ratio.push_back(r.sim_s / r.wall_s);
+      checksum += r.checksum;
+    }
+    std::sort(ratio.begin(), ratio.end());
+    std::printf("%s: median %7.0fx real time (min %.0fx, max %.0fx)  [checksum %.6f]\n", c.name,
+                ratio[ratio.size() / 2], ratio.front(), ratio.back(), checksum);
+  }
+  return 0;
+}

@@ -1,0 +1,73 @@
+#pragma once
+// Runs one manip_rt session: controller + backend in the loop thread (paced
+// with SCHED_FIFO, or as fast as possible for simulations), the logger thread,
+// the LCM bus thread, and a supervisor (the caller's thread) that watches for
+// signals. apps/manip_rt.cpp is a thin CLI around run_session().
+#include <atomic>
+#include <cstdint>
+#include <ostream>
+#include <string>
+
+#include "manip/control/config.hpp"
+#include "manip/control/controller.hpp"
+#include "manip/control/logger.hpp"
+#include "manip/control/protocol.hpp"
+#include "manip/control/records.hpp"
+#include "manip/control/rt_thread.hpp"
+#include "manip/control/timing.hpp"
+#include "manip/hardware/backend.hpp"
+
+namespace manip::hardware {
+
+// The loop body for the thread wrapper: read -> step -> write -> display.
+class RtCycle final : public control::CycleBody {
+ public:
+  RtCycle(Backend& b, control::Controller& c) : b_(b), c_(c) {}
+  bool run_cycle(std::int64_t cycle, bool overran) override {
+    b_.read(reading_);
+    const control::ActuatorCommand& cmd = c_.step(reading_, cycle, overran);
+    if (cmd.send) b_.write(cmd);
+    b_.display(cmd.cue);
+    return !c_.finished();
+  }
+  [[nodiscard]] const control::SensorReading& reading() const { return reading_; }
+
+ private:
+  Backend& b_;
+  control::Controller& c_;
+  control::SensorReading reading_{};
+};
+
+struct RunOptions {
+  std::string log_path;        // "" = no log file (tests only)
+  bool overwrite_log{false};
+  bool realtime{false};        // paced at the sample rate (SCHED_FIFO); false = as fast as possible
+  bool require_rt{false};      // refuse to run without PREEMPT_RT and real-time privileges
+  std::string lcm_url;         // "" = config bus.lcm_url; "none" = no live bus
+  double duration_s{0.0};      // stop after this much (loop) time; 0 = until the session ends
+  bool exit_on_fault{false};   // end the run on a fault (always so when not paced: nobody can reset)
+  bool quiet{false};
+  double progress_interval_s{10.0};  // progress lines on `out` (0 = none)
+  const std::atomic<bool>* interrupt{nullptr};  // set by a signal handler
+  std::string source{"manip_rt/sim"};
+};
+
+struct RunReport {
+  int exit_code{exit_code::kOk};
+  std::string message;
+  control::StopReason stop_reason{control::StopReason::kNone};
+  std::int64_t cycles{0};
+  double wall_s{0.0};
+  control::TimingSnapshot timing{};
+  control::LoggerStats log{};
+  std::int64_t log_drops{0}, bus_drops{0};
+  std::int64_t commands_accepted{0}, commands_rejected{0};
+  std::uint32_t fault_flags{0};
+  control::Protocol::Counters trials{};
+  int remaining_slots{0};
+  [[nodiscard]] std::string summary() const;
+};
+
+RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunOptions& opt, std::ostream& out);
+
+}  // namespace manip::hardware

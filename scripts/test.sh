@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# README command 2 (and CI): set-up, build with warnings as errors, run all
+# tests; then the same tests built with AddressSanitizer + UBSan.
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+jobs=$(nproc)
+scripts/setup.sh
+echo "== build (Release, -Werror) ==" >&2
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DMANIP_WERROR=ON >/dev/null
+ninja -C build
+echo "== tests ==" >&2
+(cd build && ctest --output-on-failure -j "$jobs")
+if [ "${MANIP_SKIP_SANITIZERS:-0}" != "1" ]; then
+  echo "== build (ASan + UBSan) ==" >&2
+  cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMANIP_WERROR=ON -DMANIP_SANITIZE=ON \
+    -DMANIP_BENCH=OFF >/dev/null
+  ninja -C build-asan
+  echo "== tests under sanitizers ==" >&2
+  (cd build-asan && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    ctest --output-on-failure -j "$jobs" -LE no_sanitize)
+fi

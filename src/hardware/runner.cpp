@@ -1,0 +1,248 @@
+#include "manip/hardware/runner.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <sstream>
+#include <thread>
+
+#include "manip/control/bus.hpp"
+#include "manip/control/messages.hpp"
+
+namespace manip::hardware {
+namespace {
+
+using namespace std::chrono_literals;
+
+class QueueBackpressure final : public control::Backpressure {
+ public:
+  QueueBackpressure(const control::RecordQueue* log, std::size_t log_cap, const control::RecordQueue* bus,
+                    std::size_t bus_cap)
+      : log_(log), bus_(bus), log_cap_(log_cap), bus_cap_(bus_cap) {}
+  bool must_wait() const override {
+    // Leave room for one cycle's worth of records (state + events + command results).
+    constexpr std::size_t kMargin = 64;
+    if (log_ && log_->size_approx() + kMargin >= log_cap_) return true;
+    if (bus_ && bus_->size_approx() + kMargin >= bus_cap_) return true;
+    return false;
+  }
+
+ private:
+  const control::RecordQueue* log_;
+  const control::RecordQueue* bus_;
+  std::size_t log_cap_, bus_cap_;
+};
+
+}  // namespace
+
+std::string RunReport::summary() const {
+  std::ostringstream os;
+  os << "manip_rt summary: " << cycles << " cycles in " << wall_s << " s wall; stop: "
+     << control::stop_reason_name(stop_reason) << "\n";
+  os << "  trials: " << trials.started << " started, " << trials.completed << " ended normally ("
+     << trials.perturbed_completed << " perturbed), " << trials.aborted << " aborted, " << trials.requeued
+     << " re-queued, " << trials.dropped << " dropped; " << trials.onsets << " perturbation onsets; "
+     << remaining_slots << " schedule slots left\n";
+  os << "  timing: " << timing.summary() << "\n";
+  os << "  queues: log drops " << log_drops << ", live-bus drops " << bus_drops << "; commands accepted "
+     << commands_accepted << ", rejected " << commands_rejected << "\n";
+  os << "  log: " << log.states << " states (cycles " << log.first_cycle << ".." << log.last_cycle << "), "
+     << log.missing_cycles << " missing cycles, " << log.events << " other events, " << log.faults
+     << " fault records, " << log.events_in_file << " events in the file";
+  if (log.discarded) os << ", " << log.discarded << " records discarded after the write failure";
+  os << "\n  faults latched at exit: " << control::fault_names(fault_flags) << "\n";
+  return os.str();
+}
+
+RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunOptions& opt, std::ostream& out) {
+  using control::StopReason;
+  RunReport rep;
+  auto fail = [&](int code, const std::string& msg) {
+    rep.exit_code = code;
+    rep.message = msg;
+    return rep;
+  };
+
+  // --- real-time capability checks (before anything starts) -----------------
+  const control::RtCapabilities caps = control::detect_rt();
+  if (!opt.realtime && !backend.supports_as_fast_as_possible())
+    return fail(exit_code::kUsage, "backend '" + backend.name() + "' can only run paced in real time (--realtime)");
+  if (opt.realtime) {
+    const bool fifo_ok = caps.can_fifo(cfg.loop.priority);
+    if (opt.require_rt && (!caps.preempt_rt || !fifo_ok)) {
+      std::string why;
+      if (!caps.preempt_rt)
+        why += "the kernel (" + caps.kernel_release + ", " + caps.kernel_version +
+               ") is not PREEMPT_RT (/sys/kernel/realtime absent or 0); ";
+      if (!fifo_ok)
+        why += "no real-time privileges for SCHED_FIFO priority " + std::to_string(cfg.loop.priority) +
+               " (not root, RLIMIT_RTPRIO " + std::to_string(caps.rtprio_limit) +
+               "): run as root or grant rtprio in /etc/security/limits.d; ";
+      return fail(exit_code::kRealtime, "--require-rt: refusing to run: " + why);
+    }
+    if (!caps.preempt_rt)
+      out << "manip_rt: warning: kernel " << caps.kernel_release
+          << " is not PREEMPT_RT: wake-up latency is not bounded (use --require-rt to refuse)\n";
+    if (!fifo_ok)
+      out << "manip_rt: warning: no real-time privileges (not root, RLIMIT_RTPRIO " << caps.rtprio_limit
+          << "): the loop runs with SCHED_OTHER and its timing will be unreliable; run as root or grant rtprio "
+          << cfg.loop.priority << " (use --require-rt to refuse)\n";
+    std::string err;
+    if (!control::lock_memory(err)) {
+      if (opt.require_rt) return fail(exit_code::kRealtime, "--require-rt: " + err);
+      out << "manip_rt: warning: " << err << "\n";
+    }
+  }
+
+  // --- queues, controller ------------------------------------------------------
+  control::RecordQueue log_q(cfg.loop.log_queue_capacity);
+  control::RecordQueue bus_q(cfg.loop.bus_queue_capacity);
+  control::CommandQueue cmd_q(cfg.loop.command_queue_capacity);
+  control::AuxQueue aux_q(1024);
+  const bool want_log = !opt.log_path.empty();
+  const std::string url = opt.lcm_url.empty() ? cfg.bus.lcm_url : opt.lcm_url;
+  const bool want_bus = url != "none";
+
+  control::ControllerOptions copt;
+  copt.stop_when_done = true;
+  copt.stop_on_fault = opt.exit_on_fault || !opt.realtime;
+  copt.max_cycles = opt.duration_s > 0 ? std::llround(opt.duration_s * cfg.loop.sample_rate_hz) : 0;
+  copt.utime_start_us = control::wall_clock_us();
+  control::Controller ctl(cfg, {want_log ? &log_q : nullptr, want_bus ? &bus_q : nullptr, &cmd_q}, copt);
+  control::TimingStats timing;
+
+  // --- logger --------------------------------------------------------------------
+  const manip::session_t session = control::make_session_message(cfg, opt.source, copt.utime_start_us);
+  control::Logger logger(log_q, cfg.safety.fault_history_cycles, cfg.logger.flush_interval_s);
+  if (want_log) {
+    std::error_code ec;
+    if (!opt.overwrite_log && std::filesystem::exists(opt.log_path, ec))
+      return fail(exit_code::kLog, opt.log_path + ": log file exists; refusing to overwrite a recording (--force to overwrite)");
+    std::string err;
+    if (!logger.open(opt.log_path, session, err)) return fail(exit_code::kLog, "cannot create the log: " + err);
+    ctl.set_logger_failed_flag(&logger.failed_flag());
+  } else if (!opt.quiet) {
+    out << "manip_rt: warning: no log file: nothing of this session is recorded\n";
+  }
+
+  // --- live bus ------------------------------------------------------------------
+  std::unique_ptr<control::Bus> bus;
+  if (want_bus) {
+    bus = std::make_unique<control::Bus>(cfg, control::Bus::Links{&bus_q, &cmd_q, &ctl.status(), &timing, want_log ? &aux_q : nullptr});
+    std::string err;
+    if (!bus->open(url, err)) {
+      std::string e2;
+      logger.close(e2);
+      return fail(exit_code::kBus, err);
+    }
+    bus->publish_session(session);
+    logger.set_fault_sink([b = bus.get()](const manip::fault_t& f) { b->publish_fault(f); });
+  }
+  logger.set_aux_queue(want_log && want_bus ? &aux_q : nullptr);
+
+  // --- backend -------------------------------------------------------------------
+  {
+    std::string err;
+    if (!backend.start(err)) {
+      backend.stop();
+      std::string e2;
+      logger.close(e2);
+      return fail(exit_code::kBackendUnavailable, "backend '" + backend.name() + "' failed to start: " + err);
+    }
+  }
+
+  // --- threads -------------------------------------------------------------------
+  std::atomic<bool> logger_stop{false}, bus_stop{false}, loop_done{false};
+  std::thread logger_thread;
+  if (want_log) logger_thread = std::thread([&] { logger.run(logger_stop); });
+  std::thread bus_thread;
+  if (bus) bus_thread = std::thread([&] { bus->run(bus_stop); });
+
+  RtCycle body(backend, ctl);
+  std::string rt_warning;
+  const auto wall0 = std::chrono::steady_clock::now();
+  std::thread loop_thread([&] {
+    if (opt.realtime) {
+      control::RtThreadOptions ro{cfg.loop.priority, cfg.loop.cpu, cfg.loop.prefault_stack_bytes};
+      if (!control::configure_rt_thread(ro, rt_warning)) {
+        // Fallback (the privileges were checked up front; this is a late failure).
+      }
+      control::PacedOptions po{std::llround(1e9 / cfg.loop.sample_rate_hz), cfg.loop.overrun_policy,
+                               cfg.loop.max_catch_up_cycles};
+      rep.cycles = control::run_paced(body, po, timing);
+    } else {
+      QueueBackpressure bp(want_log ? &log_q : nullptr, cfg.loop.log_queue_capacity, want_bus ? &bus_q : nullptr,
+                           cfg.loop.bus_queue_capacity);
+      rep.cycles = control::run_as_fast_as_possible(body, timing, &bp);
+    }
+    loop_done.store(true, std::memory_order_release);
+  });
+
+  // --- supervisor ----------------------------------------------------------------
+  bool interrupted = false;
+  auto next_progress = std::chrono::steady_clock::now() + std::chrono::duration<double>(opt.progress_interval_s);
+  while (!loop_done.load(std::memory_order_acquire)) {
+    std::this_thread::sleep_for(5ms);
+    if (!interrupted && opt.interrupt && opt.interrupt->load()) {
+      interrupted = true;
+      out << "manip_rt: interrupted: stopping safely (zero force, log closed)\n";
+      ctl.request_stop(StopReason::kRequested);
+    }
+    if (!opt.quiet && opt.progress_interval_s > 0 && std::chrono::steady_clock::now() >= next_progress) {
+      next_progress += std::chrono::duration<double>(opt.progress_interval_s);
+      const auto& st = ctl.status();
+      const auto cyc = st.cycle.load(std::memory_order_relaxed);
+      char buf[200];
+      std::snprintf(buf, sizeof buf, "manip_rt: t = %.1f s (loop time), mode %s, trial %d, log drops %lld\n",
+                    static_cast<double>(cyc) / cfg.loop.sample_rate_hz,
+                    control::mode_name(static_cast<control::Mode>(st.mode.load(std::memory_order_relaxed))),
+                    st.trial.load(std::memory_order_relaxed),
+                    static_cast<long long>(st.log_drops.load(std::memory_order_relaxed)));
+      out << buf << std::flush;
+    }
+  }
+  loop_thread.join();
+  backend.stop();
+  rep.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  if (!rt_warning.empty()) out << "manip_rt: warning: " << rt_warning << "\n";
+
+  bus_stop.store(true, std::memory_order_release);
+  if (bus_thread.joinable()) bus_thread.join();
+  logger_stop.store(true, std::memory_order_release);
+  if (logger_thread.joinable()) logger_thread.join();
+  std::string log_err;
+  const bool log_ok = !want_log || logger.close(log_err);
+
+  // --- report --------------------------------------------------------------------
+  const auto& st = ctl.status();
+  rep.stop_reason = static_cast<StopReason>(st.stop_reason.load());
+  rep.timing = timing.snapshot();
+  rep.log = logger.stats();
+  rep.log_drops = st.log_drops.load();
+  rep.bus_drops = st.bus_drops.load();
+  rep.commands_accepted = st.commands_accepted.load();
+  rep.commands_rejected = st.commands_rejected.load() + (bus ? bus->command_rejects() : 0);
+  rep.fault_flags = st.fault_flags.load();
+  rep.trials = ctl.protocol().counters();
+  rep.remaining_slots = ctl.protocol().remaining();
+
+  if (!log_ok || rep.stop_reason == StopReason::kLogger) {
+    rep.exit_code = exit_code::kLog;
+    rep.message = "log writing failed: " + (log_err.empty() ? logger.error() : log_err) +
+                  " (the session was stopped; motors were put in the safe state)";
+  } else if (rep.stop_reason == StopReason::kFault) {
+    rep.exit_code = exit_code::kFault;
+    rep.message = "session ended by a safety fault: " + control::fault_names(rep.fault_flags);
+  } else if (interrupted) {
+    rep.exit_code = exit_code::kInterrupted;
+    rep.message = "interrupted; stopped safely";
+  } else {
+    rep.exit_code = exit_code::kOk;
+    rep.message = rep.stop_reason == StopReason::kDuration ? "duration reached" : "session complete";
+  }
+  return rep;
+}
+
+}  // namespace manip::hardware
