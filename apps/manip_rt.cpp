@@ -104,7 +104,7 @@ int main(int argc, char** argv) {
                 << cfg.protocol.movements << " movements (" << cfg.perturbed_count() << " perturbed), log " << log
                 << "\n";
     const hw::RunReport rep = hw::run_session(cfg, *made.backend, opt, std::cerr);
-    if (!quiet || rep.exit_code != 0) std::cerr << rep.summary();
+    if (rep.cycles > 0 && (!quiet || rep.exit_code != 0)) std::cerr << rep.summary();
     std::cerr << "manip_rt: " << rep.message << " (exit " << rep.exit_code << ")\n";
     return rep.exit_code;
   } catch (const manip::control::ConfigError& e) {

@@ -213,16 +213,22 @@ const ActuatorCommand& Controller::step(const SensorReading& in, std::int64_t cy
   cmd_.send = tick;
   cmd_.enable = sm_.mode() != Mode::kInit;
   const Mode m = sm_.mode();
+  // States from the START cycle to the END/ABORT cycle inclusive carry the trial index.
+  std::int32_t trial = protocol_.trial_index();
+  for (int i = 0; i < events_.n; ++i) {
+    const auto& e = events_.ev[static_cast<std::size_t>(i)];
+    if (e.kind == manip::trial_event_t::END || e.kind == manip::trial_event_t::ABORT) trial = e.trial;
+  }
   const Phase phase = m == Mode::kRunning ? protocol_.phase() : (m == Mode::kDone ? Phase::kDone : Phase::kNone);
   cmd_.cue.phase = phase;
-  cmd_.cue.trial = protocol_.trial_index();
+  cmd_.cue.trial = trial;
   cmd_.cue.start_shoulder_m = protocol_.start_shoulder_m();
   cmd_.cue.goal_shoulder_m = protocol_.goal_shoulder_m();
 
   // state and events
   state_.cycle = cycle;
   state_.utime = utime_;
-  state_.trial = protocol_.trial_index();
+  state_.trial = trial;
   state_.phase = static_cast<std::int8_t>(phase);
   copy2(state_.x_workspace_m, in.x_workspace_m);
   copy2(state_.xd_workspace_mps, in.xd_workspace_mps);

@@ -2,7 +2,9 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <limits>
 #include <numbers>
@@ -69,32 +71,90 @@ std::vector<double> centre_taps(const Eigen::MatrixXd& fit, int window, int deri
   return taps;
 }
 
-// y[i] = w0 x[i] + sum_k w[k] (x[i+k] +- x[i-k]) for i in [h, n-h). Folding
-// the (anti)symmetric taps halves the multiplies (scipy.ndimage does the same
-// for symmetric kernels); blocks of 8 outputs keep their accumulators in
-// registers while the inner loop over the block is contiguous, so the compiler
-// vectorises it. Summation order differs from ndimage only at rounding level.
-template <bool Even>
-void convolve_interior(const double* x, double* y, std::size_t n, std::size_t h, const double* w) {
-  constexpr std::size_t kB = 8;
+// Interior samples: y[i] = w0 x[i] + sum_k w[k] (x[i+k] +- x[i-k]) for i in
+// [h, n-h). Folding the (anti)symmetric taps halves the multiplies
+// (scipy.ndimage does the same for symmetric kernels). Each block of outputs
+// keeps its accumulators in vector registers while the taps stream past, so
+// the cost is ~2 vector loads per tap per block; with window 225 this is
+// load-bound. Written with GCC/Clang vector extensions because the
+// auto-vectoriser shuffled and spilled the plain-array version (355 us per
+// 12000 samples vs 2.3 ms for scipy, not enough for the 10x budget).
+// Summation order differs from ndimage only at rounding level.
+template <class V, int kVecs, bool Even>
+[[gnu::always_inline]] inline void convolve_interior_kernel(const double* x, double* y, std::size_t n, std::size_t h,
+                                                            const double* w) {
+  constexpr std::size_t kL = sizeof(V) / sizeof(double);
+  constexpr std::size_t kB = kL * kVecs;
+  // memcpy is how unaligned vector loads/stores are spelled portably; the
+  // compiler emits plain (v)movupd. No helper returning V by value: that would
+  // be an ABI-changing call outside the AVX2 target region.
   const std::size_t end = n - h;
   std::size_t i = h;
   for (; i + kB <= end; i += kB) {
-    double acc[kB];
-    for (std::size_t j = 0; j < kB; ++j) acc[j] = Even ? w[0] * x[i + j] : 0.0;
+    V acc[kVecs];
+    for (int v = 0; v < kVecs; ++v) {
+      if constexpr (Even) {
+        std::memcpy(&acc[v], x + i + v * kL, sizeof(V));
+        acc[v] *= w[0];
+      } else {
+        acc[v] = V{};
+      }
+    }
     for (std::size_t k = 1; k <= h; ++k) {
-      const double c = w[k];
+      const V c = V{} + w[k];
       const double* xp = x + i + k;
       const double* xm = x + i - k;
-      for (std::size_t j = 0; j < kB; ++j) acc[j] += c * (Even ? xp[j] + xm[j] : xp[j] - xm[j]);
+      for (int v = 0; v < kVecs; ++v) {
+        V a, b;
+        std::memcpy(&a, xp + v * kL, sizeof(V));
+        std::memcpy(&b, xm + v * kL, sizeof(V));
+        acc[v] += c * (Even ? a + b : a - b);
+      }
     }
-    for (std::size_t j = 0; j < kB; ++j) y[i + j] = acc[j];
+    for (int v = 0; v < kVecs; ++v) std::memcpy(y + i + v * kL, &acc[v], sizeof(V));
   }
   for (; i < end; ++i) {
     double acc = Even ? w[0] * x[i] : 0.0;
     for (std::size_t k = 1; k <= h; ++k) acc += w[k] * (Even ? x[i + k] + x[i - k] : x[i + k] - x[i - k]);
     y[i] = acc;
   }
+}
+
+typedef double V2d __attribute__((vector_size(16)));
+
+template <bool Even>
+void convolve_interior_generic(const double* x, double* y, std::size_t n, std::size_t h, const double* w) {
+  convolve_interior_kernel<V2d, 4, Even>(x, y, n, h, w);
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// Same kernel compiled for AVX2 + FMA, chosen at run time: 4 lanes and fused
+// multiply-adds halve the time again. The FMA rounds once instead of twice,
+// so results differ from the SSE2 path at the last-ulp level only.
+#define MANIP_SAVGOL_AVX2 1
+typedef double V4d __attribute__((vector_size(32)));
+
+template <bool Even>
+__attribute__((target("avx2,fma"))) void convolve_interior_avx2(const double* x, double* y, std::size_t n,
+                                                                 std::size_t h, const double* w) {
+  convolve_interior_kernel<V4d, 4, Even>(x, y, n, h, w);
+}
+
+bool cpu_has_avx2_fma() {
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return has;
+}
+#endif
+
+std::atomic<bool> g_allow_avx2{true};
+
+template <bool Even>
+void convolve_interior(const double* x, double* y, std::size_t n, std::size_t h, const double* w) {
+#ifdef MANIP_SAVGOL_AVX2
+  if (g_allow_avx2.load(std::memory_order_relaxed) && cpu_has_avx2_fma())
+    return convolve_interior_avx2<Even>(x, y, n, h, w);
+#endif
+  convolve_interior_generic<Even>(x, y, n, h, w);
 }
 
 double smoother_response(const std::vector<double>& taps, double f_norm) {
@@ -207,6 +267,17 @@ void SavgolFilter::apply(std::span<const double> x, std::span<double> y) const {
   fit_edge(x.data(), eval_left_, y.data());
   fit_edge(x.data() + (n - w), eval_right_, y.data() + (n - h));
 }
+
+namespace detail {
+void savgol_allow_avx2(bool allow) { g_allow_avx2.store(allow, std::memory_order_relaxed); }
+bool savgol_uses_avx2() {
+#ifdef MANIP_SAVGOL_AVX2
+  return g_allow_avx2.load(std::memory_order_relaxed) && cpu_has_avx2_fma();
+#else
+  return false;
+#endif
+}
+}  // namespace detail
 
 double savgol_cutoff_hz(int window, int polyorder, double fs_hz) {
   validate(window, polyorder, 0, 1.0);

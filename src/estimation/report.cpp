@@ -230,6 +230,20 @@ std::string format_text(const Report& r, const std::string& log_name) {
       << fmt(r.truth.d_nspm(0, 0)) << ", " << fmt(r.truth.d_nspm(0, 1)) << "; " << fmt(r.truth.d_nspm(1, 0)) << ", "
       << fmt(r.truth.d_nspm(1, 1)) << "], K = [" << fmt(r.truth.k_npm(0, 0)) << ", " << fmt(r.truth.k_npm(0, 1)) << "; "
       << fmt(r.truth.k_npm(1, 0)) << ", " << fmt(r.truth.k_npm(1, 1)) << "]\n";
+    for (const auto& s : r.summaries) {
+      if (s.group != "session") continue;
+      o << "    " << std::left << std::setw(13) << s.method << std::right << " error vs truth: D";
+      for (int i = 0; i < 4; ++i) {
+        const double t = r.truth.d_nspm(i / 2, i % 2);
+        o << " " << fmt(100.0 * (s.d_nspm(i / 2, i % 2) - t) / std::abs(t), 1) << "%";
+      }
+      o << "  K";
+      for (int i : {0, 1, 3}) {
+        const double t = r.truth.k_npm(i / 2, i % 2);
+        o << " " << fmt(100.0 * (s.k_npm(i / 2, i % 2) - t) / std::abs(t), 1) << "%";
+      }
+      o << "\n";
+    }
   }
   if (!r.trials.empty()) {
     o << "\n  per trial:\n    method    trial angle    D11     D12     D21     D22     K11     K12     K22   VAF  flag\n";

@@ -82,6 +82,8 @@ void TrialAssembler::on_state(const manip::state_t& s) {
   cur_.f_sensor_n.push_back(fr.vector_to_shoulder(v2(s.f_sensor_workspace_n)));
   cur_.u_pert_n.push_back(fr.vector_to_shoulder(v2(s.u_pert_workspace_n)));
   cur_.x_ref_m.push_back(fr.point_to_shoulder(v2(s.x_ref_workspace_m)));
+  cur_.xd_ref_m.push_back(fr.vector_to_shoulder(v2(s.xd_ref_workspace_mps)));
+  cur_.xdd_ref_m.push_back(fr.vector_to_shoulder(v2(s.xdd_ref_workspace_mps2)));
 }
 
 void TrialAssembler::on_truth_state(const manip::state_t& s) {
@@ -89,6 +91,8 @@ void TrialAssembler::on_truth_state(const manip::state_t& s) {
   const auto idx = s.cycle - cur_.start_cycle;
   if (idx != static_cast<std::int64_t>(cur_.x_twin_m.size())) return;  // misaligned twin: ignore it
   cur_.x_twin_m.push_back(info_.frame.point_to_shoulder(v2(s.x_ref_workspace_m)));
+  cur_.xd_twin_m.push_back(info_.frame.vector_to_shoulder(v2(s.xd_ref_workspace_mps)));
+  cur_.xdd_twin_m.push_back(info_.frame.vector_to_shoulder(v2(s.xdd_ref_workspace_mps2)));
 }
 
 void TrialAssembler::on_truth_impedance(const manip::impedance_truth_t& t) {
@@ -151,7 +155,11 @@ void TrialAssembler::on_trial_event(const manip::trial_event_t& e) {
         cur_.perturbed = false;
         cur_.onset_index = -1;
       }
-      if (cur_.x_twin_m.size() != cur_.x_m.size()) cur_.x_twin_m.clear();
+      if (cur_.x_twin_m.size() != cur_.x_m.size()) {
+        cur_.x_twin_m.clear();
+        cur_.xd_twin_m.clear();
+        cur_.xdd_twin_m.clear();
+      }
       cb_(info_, std::move(cur_));
       cur_ = TrialData{};
       break;

@@ -54,6 +54,7 @@ VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& 
   w.u_pert.assign(trial.u_pert_n.begin() + static_cast<std::ptrdiff_t>(on),
                   trial.u_pert_n.begin() + static_cast<std::ptrdiff_t>(on + n_win));
 
+  const Mat2 m_dev = info.m_adm_kg + info.m_handle_kg;
   std::vector<double> buf(trial.size()), hp(trial.size()), acc(n_win), vel(n_win), pos(n_win), dfs(n_win);
   for (int a = 0; a < 2; ++a) {
     // Jerk -> high-pass -> integrate from onset (§3.1).
@@ -75,14 +76,21 @@ VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& 
       w.du_ext_force[k](a) = dfs[k];  // Δf_s for now, completed below
     }
   }
-  const Mat2 m_dev = info.m_adm_kg + info.m_handle_kg;
   for (std::size_t k = 0; k < n_win; ++k) {
     w.du_ext_adm[k] = w.u_pert[k] - m_dev * w.dxdd[k] - info.d_adm_nspm * w.dxd[k];  // eq. 21
     w.du_ext_force[k] = -(w.du_ext_force[k] + info.m_handle_kg * w.dxdd[k]);
   }
   if (!trial.x_twin_m.empty()) {
     w.dx_true.resize(n_win);
-    for (std::size_t k = 0; k < n_win; ++k) w.dx_true[k] = trial.x_ref_m[on + k] - trial.x_twin_m[on + k];
+    w.dxd_true.resize(n_win);
+    w.dxdd_true.resize(n_win);
+    w.du_ext_true.resize(n_win);
+    for (std::size_t k = 0; k < n_win; ++k) {
+      w.dx_true[k] = trial.x_ref_m[on + k] - trial.x_twin_m[on + k];
+      w.dxd_true[k] = trial.xd_ref_m[on + k] - trial.xd_twin_m[on + k];
+      w.dxdd_true[k] = trial.xdd_ref_m[on + k] - trial.xdd_twin_m[on + k];
+      w.du_ext_true[k] = w.u_pert[k] - m_dev * w.dxdd_true[k] - info.d_adm_nspm * w.dxd_true[k];  // eq. 21, exact signals
+    }
   }
   return w;
 }

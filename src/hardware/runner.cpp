@@ -80,6 +80,7 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
         why += "no real-time privileges for SCHED_FIFO priority " + std::to_string(cfg.loop.priority) +
                " (not root, RLIMIT_RTPRIO " + std::to_string(caps.rtprio_limit) +
                "): run as root or grant rtprio in /etc/security/limits.d; ";
+      why.resize(why.size() - 2);  // trailing "; "
       return fail(exit_code::kRealtime, "--require-rt: refusing to run: " + why);
     }
     if (!caps.preempt_rt)

@@ -19,7 +19,92 @@ Mat2 inverse2(const Mat2& m) {
   return r / det;
 }
 
+std::uint64_t splitmix64(std::uint64_t& x) {
+  std::uint64_t z = (x += 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+
+constexpr double kZigR = 3.442619855899;  // start of the tail (128 layers)
+
 }  // namespace
+
+// ---- GaussianSource ---------------------------------------------------------
+
+GaussianSource::GaussianSource() {
+  // Layer tables of Marsaglia & Tsang (2000), 128 layers of area v each; the
+  // value is a signed 32-bit integer scaled by wn.
+  constexpr double m1 = 2147483648.0;  // 2^31
+  const double v = 9.91256303526217e-3;
+  double dn = kZigR, tn = dn;
+  const double q = v / std::exp(-0.5 * dn * dn);
+  kn_[0] = static_cast<std::uint32_t>((dn / q) * m1);
+  kn_[1] = 0;
+  wn_[0] = q / m1;
+  wn_[127] = dn / m1;
+  fn_[0] = 1.0;
+  fn_[127] = std::exp(-0.5 * dn * dn);
+  for (int i = 126; i >= 1; --i) {
+    dn = std::sqrt(-2.0 * std::log(v / dn + std::exp(-0.5 * dn * dn)));
+    kn_[static_cast<std::size_t>(i + 1)] = static_cast<std::uint32_t>((dn / tn) * m1);
+    tn = dn;
+    fn_[static_cast<std::size_t>(i)] = std::exp(-0.5 * dn * dn);
+    wn_[static_cast<std::size_t>(i)] = dn / m1;
+  }
+  seed(0);
+}
+
+void GaussianSource::seed(std::uint64_t s) {
+  for (auto& w : s_) w = splitmix64(s);
+}
+
+std::uint64_t GaussianSource::next_u64() {  // xoshiro256++
+  const std::uint64_t r = rotl(s_[0] + s_[3], 23) + s_[0];
+  const std::uint64_t t = s_[1] << 17;
+  s_[2] ^= s_[0];
+  s_[3] ^= s_[1];
+  s_[1] ^= s_[2];
+  s_[0] ^= s_[3];
+  s_[2] ^= t;
+  s_[3] = rotl(s_[3], 45);
+  return r;
+}
+
+double GaussianSource::uniform_open() { return (static_cast<double>(next_u64() >> 11) + 0.5) * 0x1.0p-53; }
+
+double GaussianSource::operator()() {
+  const std::uint64_t u = next_u64();
+  const auto iz = static_cast<unsigned>(u & 127u);
+  const auto hz = static_cast<std::int64_t>(static_cast<std::int32_t>(static_cast<std::uint32_t>(u >> 32)));
+  const auto mag = static_cast<std::uint64_t>(hz < 0 ? -hz : hz);
+  if (mag < kn_[iz]) return static_cast<double>(hz) * wn_[iz];  // inside the layer: ~99 % of draws
+  return tail(hz, iz);
+}
+
+double GaussianSource::tail(std::int64_t hz, unsigned iz) {
+  for (;;) {
+    const double x = static_cast<double>(hz) * wn_[iz];
+    if (iz == 0) {  // the base strip's tail beyond r (Marsaglia 1964)
+      double xt, y;
+      do {
+        xt = -std::log(uniform_open()) / kZigR;
+        y = -std::log(uniform_open());
+      } while (y + y < xt * xt);
+      return hz > 0 ? kZigR + xt : -kZigR - xt;
+    }
+    if (fn_[iz] + uniform_open() * (fn_[iz - 1] - fn_[iz]) < std::exp(-0.5 * x * x)) return x;
+    const std::uint64_t u = next_u64();
+    iz = static_cast<unsigned>(u & 127u);
+    hz = static_cast<std::int64_t>(static_cast<std::int32_t>(static_cast<std::uint32_t>(u >> 32)));
+    const auto mag = static_cast<std::uint64_t>(hz < 0 ? -hz : hz);
+    if (mag < kn_[iz]) return static_cast<double>(hz) * wn_[iz];
+  }
+}
+
+// ---- NeuromechanicalArm -----------------------------------------------------
 
 NeuromechanicalArm::NeuromechanicalArm(const NeuromechParams& p) : p_(p), arm_(p.anthropometrics) {
   if (auto why = p_.invalid_reason()) throw std::invalid_argument("neuromech params: " + *why);
@@ -35,7 +120,79 @@ NeuromechanicalArm::NeuromechanicalArm(const NeuromechParams& p) : p_(p), arm_(p
   // Exact Ornstein-Uhlenbeck update over one step (unit stationary variance).
   noise_rho_ = std::exp(-p_.step_s / p_.noise_tau_s);
   noise_sigma_ = std::sqrt(1.0 - noise_rho_ * noise_rho_);
+  const auto& an = p_.anthropometrics;
+  const double l1 = an.length_m[0], r1 = an.com_m[0], r2 = an.com_m[1];
+  m_d_ = an.inertia_kgm2[1] + an.mass_kg[1] * r2 * r2;
+  m_a_ = an.inertia_kgm2[0] + an.mass_kg[0] * r1 * r1 + an.mass_kg[1] * l1 * l1 + m_d_;
+  m_b_ = an.mass_kg[1] * l1 * r2;
+  aat_inv_ = inverse2(p_.moment_arms_m * p_.moment_arms_m.transpose());
+  a_tonic_torque_ = p_.moment_arms_m * p_.tonic_activation_n;
   begin_trial(ReachSpec{}, 0);
+}
+
+// Same formulas as TwoLinkArm (a test checks them against it), with the sines and
+// cosines computed once per posture: they dominated the cost of a step.
+NeuromechanicalArm::Posture NeuromechanicalArm::posture(const Vec2& q) const {
+  // Locals, so that the compiler fuses each sin/cos pair into one sincos call.
+  const double a1 = q(0), a2 = q(1);
+  const double s1 = std::sin(a1), c1 = std::cos(a1);
+  const double s2 = std::sin(a2), c2 = std::cos(a2);
+  Posture k;
+  k.s1 = s1;
+  k.c1 = c1;
+  k.s2 = s2;
+  k.c2 = c2;
+  k.s12 = s1 * c2 + c1 * s2;
+  k.c12 = c1 * c2 - s1 * s2;
+  return finish_posture(k);
+}
+
+NeuromechanicalArm::Posture NeuromechanicalArm::finish_posture(Posture k) const {
+  const double l1 = p_.anthropometrics.length_m[0], l2 = p_.anthropometrics.length_m[1];
+  k.x << l1 * k.c1 + l2 * k.c12, l1 * k.s1 + l2 * k.s12;
+  k.j << -l1 * k.s1 - l2 * k.s12, -l2 * k.s12, l1 * k.c1 + l2 * k.c12, l2 * k.c12;
+  k.jinv = inverse2(k.j);
+  const double off = m_d_ + m_b_ * k.c2;
+  k.mq << m_a_ + 2.0 * m_b_ * k.c2, off, off, m_d_;  // eq. 1
+  return k;
+}
+
+bool NeuromechanicalArm::posture_at_hand(const Vec2& x, Vec2& q, Posture& k) const {
+  const double l1 = p_.anthropometrics.length_m[0], l2 = p_.anthropometrics.length_m[1];
+  const double r2 = x.squaredNorm();
+  const double c2 = (r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2);
+  if (!(c2 > -1.0 && c2 < 1.0)) return false;
+  const double s2 = std::sqrt(1.0 - c2 * c2);  // q2 in (0, pi): elbow to the right
+  // q1 = atan2(x2, x1) - atan2(l2 s2, l1 + l2 c2); the second angle's cosine and
+  // sine are (l1 + l2 c2) / |x| and l2 s2 / |x|, so cos q1 and sin q1 are products.
+  const double u = l1 + l2 * c2, v = l2 * s2;
+  k.c1 = (x(0) * u + x(1) * v) / r2;
+  k.s1 = (x(1) * u - x(0) * v) / r2;
+  k.c2 = c2;
+  k.s2 = s2;
+  k.s12 = k.s1 * c2 + k.c1 * s2;
+  k.c12 = k.c1 * c2 - k.s1 * s2;
+  q << std::atan2(k.s1, k.c1), std::atan2(s2, c2);
+  k = finish_posture(k);
+  return true;
+}
+
+Mat2 NeuromechanicalArm::jacobian_dot(const Posture& k, const Vec2& qd) const {
+  const double l1 = p_.anthropometrics.length_m[0], l2 = p_.anthropometrics.length_m[1];
+  const double w1 = qd(0), w12 = qd(0) + qd(1);
+  Mat2 jd;
+  jd << -l1 * k.c1 * w1 - l2 * k.c12 * w12, -l2 * k.c12 * w12, -l1 * k.s1 * w1 - l2 * k.s12 * w12, -l2 * k.s12 * w12;
+  return jd;
+}
+
+Vec2 NeuromechanicalArm::coriolis(const Posture& k, const Vec2& qd) const {
+  const double h = m_b_ * k.s2;
+  return Vec2(-h * (2.0 * qd(0) * qd(1) + qd(1) * qd(1)), h * qd(0) * qd(0));
+}
+
+void NeuromechanicalArm::set_q(const Vec2& q) {
+  js_.q_rad = q;
+  pose_ = posture(q);
 }
 
 void NeuromechanicalArm::begin_trial(const ReachSpec& reach, std::uint64_t seed) {
@@ -48,24 +205,24 @@ void NeuromechanicalArm::begin_trial(const ReachSpec& reach, std::uint64_t seed)
   step_ = 0;
   lambda_.setZero();
   xdd_last_.setZero();
-  rng_.seed(seed);
-  gauss_.reset();
+  gauss_.seed(seed);
   // Start the noise in its stationary distribution, so that trials are alike from t = 0.
-  for (int i = 0; i < kMuscles; ++i) noise_(i) = gauss_(rng_);
-  js_.q_rad = *q0;
+  for (int i = 0; i < kMuscles; ++i) noise_(i) = gauss_();
+  set_q(*q0);
   js_.qd_radps.setZero();
   update_plan();
   fill_delay_line();
 }
 
 void NeuromechanicalArm::set_joint_state(const JointState& s) {
-  js_ = s;
+  set_q(s.q_rad);
+  js_.qd_radps = s.qd_radps;
   fill_delay_line();
 }
 
-Vec2 NeuromechanicalArm::hand_position_m() const { return arm_.hand_position_m(js_.q_rad); }
+Vec2 NeuromechanicalArm::hand_position_m() const { return pose_.x; }
 
-Vec2 NeuromechanicalArm::hand_velocity_mps() const { return arm_.jacobian(js_.q_rad) * js_.qd_radps; }
+Vec2 NeuromechanicalArm::hand_velocity_mps() const { return pose_.j * js_.qd_radps; }
 
 // Minimum deviation from the tonic co-contraction that produces tau with pulling
 // muscles:  min 1/2 |a - c|^2  s.t.  A a = tau, a >= 0.  KKT: a = max(0, c + A^T lambda).
@@ -76,6 +233,16 @@ Vec2 NeuromechanicalArm::hand_velocity_mps() const { return arm_.jacobian(js_.q_
 MuscleVec NeuromechanicalArm::distribute(const Vec2& tau_nm) {
   const auto& A = p_.moment_arms_m;
   const MuscleVec& c = p_.tonic_activation_n;
+  {
+    // Usual case (tonic co-contraction): every muscle active, a = c + A^T lambda with
+    // A A^T lambda = tau - A c. It is the exact optimum when all of a is positive.
+    const Vec2 lam = aat_inv_ * (tau_nm - a_tonic_torque_);
+    const MuscleVec a = c + A.transpose() * lam;
+    if (a.minCoeff() > 0.0) {
+      lambda_ = lam;
+      return a;
+    }
+  }
   const auto phi = [&](const Vec2& l, MuscleVec& a) {
     a = (c + A.transpose() * l).cwiseMax(0.0);
     return 0.5 * a.squaredNorm() - tau_nm.dot(l);
@@ -113,18 +280,21 @@ void NeuromechanicalArm::update_plan() {
   plan_.x = s.x;
   plan_.xd = s.xd;
   plan_.xdd = s.xdd;
+  Vec2 q;
+  Posture k;
   // A plan leaving the workspace (a huge bow) keeps the last reachable posture.
-  if (const auto q = arm_.inverse_kinematics(s.x)) plan_.q = *q;
-  const Mat2 j = arm_.jacobian(plan_.q);
-  const Mat2 jinv = inverse2(j);
-  plan_.qd = jinv * s.xd;
+  if (posture_at_hand(s.x, q, k))
+    plan_.q = q;
+  else
+    k = posture(plan_.q);
+  plan_.qd = k.jinv * s.xd;
   Vec2 tau = Vec2::Zero();
   if (p_.feedforward_enabled) {
-    const Vec2 qdd = jinv * (s.xdd - arm_.jacobian_dot(plan_.q, plan_.qd) * plan_.qd);
+    const Vec2 qdd = k.jinv * (s.xdd - jacobian_dot(k, plan_.qd) * plan_.qd);
     // Inverse dynamics of the plan (eq. 1) with the expected external force on
     // the hand, -(M_load xdd + D_load xd): the admittance the person has learnt.
     const Vec2 f_load = p_.load_mass_kg.cwiseProduct(s.xdd) + p_.load_damping_nspm.cwiseProduct(s.xd);
-    tau = arm_.joint_inertia(plan_.q) * qdd + arm_.coriolis(plan_.q, plan_.qd) + j.transpose() * f_load;
+    tau = k.mq * qdd + coriolis(k, plan_.qd) + k.j.transpose() * f_load;
   }
   plan_.a_ff = distribute(tau);
 }
@@ -194,20 +364,22 @@ MuscleVec NeuromechanicalArm::activations_n() const { return muscles_at(js_.q_ra
 
 MuscleVec NeuromechanicalArm::tensions_n() const { return muscles_at(js_.q_rad, js_.qd_radps).tension; }
 
-void NeuromechanicalArm::dynamics_at(const Vec2& q, const Vec2& qd, Mat2& m_x, Vec2& h) const {
-  const Mat2 jinv = inverse2(arm_.jacobian(q));
+void NeuromechanicalArm::dynamics_at(const Posture& k, const Vec2& q, const Vec2& qd, Mat2& m_x, Vec2& h) const {
   const Vec2 tau = p_.moment_arms_m * muscles_at(q, qd).tension;  // eq. 2
-  m_x = jinv.transpose() * arm_.joint_inertia(q) * jinv;          // eq. 16
+  m_x = k.jinv.transpose() * k.mq * k.jinv;                         // eq. 16
   // M_q qdd + C = tau + J^T u with qdd = J^-1 (xdd - Jd qd)  =>  M_x xdd = h + u.
-  h = jinv.transpose() * (tau - arm_.coriolis(q, qd)) + m_x * (arm_.jacobian_dot(q, qd) * qd);
+  h = k.jinv.transpose() * (tau - coriolis(k, qd)) + m_x * (jacobian_dot(k, qd) * qd);
 }
 
-void NeuromechanicalArm::endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) { dynamics_at(js_.q_rad, js_.qd_radps, m_x_kg, h_n); }
+void NeuromechanicalArm::endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) {
+  dynamics_at(pose_, js_.q_rad, js_.qd_radps, m_x_kg, h_n);
+}
 
 void NeuromechanicalArm::endpoint_dynamics_at(const Vec2& x, const Vec2& xd, Mat2& m_x_kg, Vec2& h_n) const {
-  const auto q = arm_.inverse_kinematics(x);
-  if (!q) throw std::invalid_argument("NeuromechanicalArm::endpoint_dynamics_at: point out of reach");
-  dynamics_at(*q, inverse2(arm_.jacobian(*q)) * xd, m_x_kg, h_n);
+  Vec2 q;
+  Posture k;
+  if (!posture_at_hand(x, q, k)) throw std::invalid_argument("NeuromechanicalArm::endpoint_dynamics_at: point out of reach");
+  dynamics_at(k, q, k.jinv * xd, m_x_kg, h_n);
 }
 
 void NeuromechanicalArm::advance(double dt_s, const Vec2& xdd_hand_mps2) {
@@ -219,13 +391,12 @@ void NeuromechanicalArm::advance(double dt_s, const Vec2& xdd_hand_mps2) {
   const double h = p_.step_s;
   for (long s = 0; s < n; ++s) {
     // Semi-implicit Euler with the plant's hand acceleration held over the step.
-    Vec2& q = js_.q_rad;
     Vec2& qd = js_.qd_radps;
-    const Vec2 qdd = inverse2(arm_.jacobian(q)) * (xdd_hand_mps2 - arm_.jacobian_dot(q, qd) * qd);
+    const Vec2 qdd = pose_.jinv * (xdd_hand_mps2 - jacobian_dot(pose_, qd) * qd);
     qd += h * qdd;
-    q += h * qd;
+    set_q(js_.q_rad + h * qd);
     ++step_;
-    for (int i = 0; i < kMuscles; ++i) noise_(i) = noise_rho_ * noise_(i) + noise_sigma_ * gauss_(rng_);
+    for (int i = 0; i < kMuscles; ++i) noise_(i) = noise_rho_ * noise_(i) + noise_sigma_ * gauss_();
     update_plan();
     push_error();
   }
@@ -236,7 +407,7 @@ void NeuromechanicalArm::advance(double dt_s, const Vec2& xdd_hand_mps2) {
 void NeuromechanicalArm::endpoint_impedance_eq16_18(Mat2& d_nspm, Mat2& k_npm) const {
   const auto& A = p_.moment_arms_m;
   const Muscles m = muscles_at(js_.q_rad, js_.qd_radps);
-  const Mat2 jinv = inverse2(arm_.jacobian(js_.q_rad));
+  const Mat2& jinv = pose_.jinv;
   // eq. 11 with the intrinsic muscle impedance: K_q = A diag(K_m) A^T, D_q = A diag(D_m) A^T.
   const Mat2 kq = A * m.k.cwiseProduct(m.active).asDiagonal() * A.transpose();
   const Mat2 dq = A * m.d.cwiseProduct(m.active).asDiagonal() * A.transpose();
@@ -250,36 +421,33 @@ void NeuromechanicalArm::endpoint_impedance(Mat2& d_nspm, Mat2& k_npm) const {
   const Vec2& q = js_.q_rad;
   const Vec2& qd = js_.qd_radps;
   const Muscles m = muscles_at(q, qd);
-  const Mat2 j = arm_.jacobian(q);
-  const Mat2 jinv = inverse2(j);
-  const Mat2 jd = arm_.jacobian_dot(q, qd);
-  const Mat2 mq = arm_.joint_inertia(q);
+  const Mat2& jinv = pose_.jinv;
+  const Mat2 jd = jacobian_dot(pose_, qd);
+  const Mat2& mq = pose_.mq;
   const Mat2 m_x = jinv.transpose() * mq * jinv;
   const Vec2 tau = A * m.tension;
   // Operating point: the acceleration the plant imposed last, and the external
   // force that goes with it, u = J^-T (M_q qdd + C - tau) = M_x xdd - h.
   const Vec2 qdd = jinv * (xdd_last_ - jd * qd);
-  const Vec2 u = jinv.transpose() * (mq * qdd + arm_.coriolis(q, qd) - tau);
+  const Vec2 u = jinv.transpose() * (mq * qdd + coriolis(pose_, qd) - tau);
 
   // dJ/dq_i, and the products the chain rule needs (columns i = 1, 2).
   Mat2 h1, h2, g;
   for (int i = 0; i < 2; ++i) {
-    const Mat2 dj = arm_.jacobian_dot(q, Vec2::Unit(i));  // dJ/dq_i
+    const Mat2 dj = jacobian_dot(pose_, Vec2::Unit(i));  // dJ/dq_i
     h1.col(i) = dj * qd;
     h2.col(i) = dj * qdd;
     g.col(i) = dj.transpose() * u;  // d(J^T)/dq_i u
   }
   const double l1 = an.length_m[0], l2 = an.length_m[1];
-  const double s1 = std::sin(q(0)), c1 = std::cos(q(0));
-  const double s12 = std::sin(q(0) + q(1)), c12 = std::cos(q(0) + q(1));
+  const double s1 = pose_.s1, c1 = pose_.c1, s12 = pose_.s12, c12 = pose_.c12;
   const double w1 = qd(0), w12 = qd(0) + qd(1);
   // L = d(Jd qd)/dq with Jd qd = -[l1 c1 w1^2 + l2 c12 w12^2, l1 s1 w1^2 + l2 s12 w12^2].
   Mat2 l;
   l << l1 * s1 * w1 * w1 + l2 * s12 * w12 * w12, l2 * s12 * w12 * w12,  //
       -l1 * c1 * w1 * w1 - l2 * c12 * w12 * w12, -l2 * c12 * w12 * w12;
   // C = hc [-(2 w1 w2 + w2^2), w1^2], hc = m2 l1 r2 sin q2 (TwoLinkArm::coriolis).
-  const double k2 = an.mass_kg[1] * l1 * an.com_m[1];
-  const double hc = k2 * std::sin(q(1)), hc_q2 = k2 * std::cos(q(1));
+  const double hc = m_b_ * pose_.s2, hc_q2 = m_b_ * pose_.c2;
   Mat2 dc_dq, dc_dqd, dmqdd_dq;
   dc_dq << 0.0, -hc_q2 * (2.0 * qd(0) * qd(1) + qd(1) * qd(1)), 0.0, hc_q2 * qd(0) * qd(0);
   dc_dqd << -2.0 * hc * qd(1), -2.0 * hc * (qd(0) + qd(1)), 2.0 * hc * qd(0), 0.0;
@@ -304,7 +472,7 @@ void NeuromechanicalArm::reflex_endpoint_gains(Pathway p, Mat2& d_nspm, Mat2& k_
   }
   const auto& A = p_.moment_arms_m;
   const Muscles m = muscles_at(js_.q_rad, js_.qd_radps);
-  const Mat2 jinv = inverse2(arm_.jacobian(js_.q_rad));
+  const Mat2& jinv = pose_.jinv;
   // du = -kp A^T dq(t - delay)  =>  dtau = -kp A diag(dm/du) A^T dq(t - delay).
   const Mat2 s = jinv.transpose() * (A * m.dtension_du.asDiagonal() * A.transpose()) * jinv;
   k_npm = f.kp_npm * s;

@@ -7,26 +7,22 @@
 namespace manip::sim {
 
 void apply_noise(NoiseLevel level, SessionDesign& d, LinearHumanParams& h) {
-  if (level == NoiseLevel::none) {
-    d.encoder_resolution_m = 0.0;
-    d.force_noise_n = 0.0;
-    d.reach_duration_jitter_s = 0.0;
-    d.lateral_bow_std_m = 0.0;
-    h.motor_noise_n = 0.0;
-  } else {
-    d.encoder_resolution_m = 1e-6;
-    d.force_noise_n = 0.05;
-    d.reach_duration_jitter_s = 0.25;
-    d.lateral_bow_std_m = 0.005;
-    h.motor_noise_n = 0.2;
-    h.motor_noise_tau_s = 0.05;
-  }
+  const bool all = level == NoiseLevel::realistic;
+  d.encoder_resolution_m = (all || level == NoiseLevel::quantisation) ? 1e-6 : 0.0;
+  d.force_noise_n = (all || level == NoiseLevel::quantisation) ? 0.05 : 0.0;
+  d.reach_duration_jitter_s = (all || level == NoiseLevel::variability) ? 0.25 : 0.0;
+  d.lateral_bow_std_m = (all || level == NoiseLevel::variability) ? 0.005 : 0.0;
+  h.motor_noise_n = (all || level == NoiseLevel::motor) ? 0.2 : 0.0;
+  h.motor_noise_tau_s = 0.05;
 }
 
 NoiseLevel parse_noise_level(const std::string& s) {
   if (s == "none") return NoiseLevel::none;
   if (s == "realistic") return NoiseLevel::realistic;
-  throw std::invalid_argument("noise level must be 'none' or 'realistic', not '" + s + "'");
+  if (s == "quantisation") return NoiseLevel::quantisation;
+  if (s == "motor") return NoiseLevel::motor;
+  if (s == "variability") return NoiseLevel::variability;
+  throw std::invalid_argument("noise level must be none, quantisation, motor, variability or realistic, not '" + s + "'");
 }
 
 LinearHumanParams table1_person() {

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdio>
+#include <cstdlib>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -77,6 +79,13 @@ inline double norm_error(std::span<const double> got, std::span<const double> wa
   for (std::size_t i = 0; i < got.size(); ++i) e = std::max(e, std::fabs(got[i] - want[i]));
   const double p = peak(want);
   return p > 0.0 ? e / p : e;
+}
+
+// Returns e; with MANIP_DSP_REPORT set in the environment also prints it, so
+// that `MANIP_DSP_REPORT=1 test_dsp` lists every observed error vs scipy.
+inline double observed(const std::string& what, double e) {
+  if (std::getenv("MANIP_DSP_REPORT")) std::printf("  %-60s %.2e\n", what.c_str(), e);
+  return e;
 }
 
 }  // namespace manip::dsp::test

@@ -14,6 +14,7 @@ using manip::dsp::savgol_window_for_cutoff;
 using manip::dsp::SavgolFilter;
 using manip::dsp::test::norm_error;
 using manip::dsp::test::Numbers;
+using manip::dsp::test::observed;
 using manip::dsp::test::rel_error;
 
 // Two references per case (see make_fixtures.py): the exact least-squares
@@ -49,8 +50,9 @@ TEST_CASE("savgol_coeffs: exact and scipy references, deriv 0..3 with delta, sma
     const auto c = savgol_coeffs(w, p, d, delta);
     REQUIRE(c.size() == exact.size());
     const Bounds b = bounds_for(w);
-    CHECK(norm_error(c, exact) <= b.exact);
-    CHECK(norm_error(c, scipy) <= b.scipy);
+    const std::string tag = "savgol_coeffs W" + std::to_string(w) + " p" + std::to_string(p) + " d" + std::to_string(d);
+    CHECK(observed(tag + " vs exact", norm_error(c, exact)) <= b.exact);
+    CHECK(observed(tag + " vs scipy", norm_error(c, scipy)) <= b.scipy);
     CHECK(SavgolFilter(w, p, d, delta).coeffs() == c);
     // Exact (anti)symmetry for the centred fit.
     for (int j = 0; j < w; ++j) CHECK(c[static_cast<std::size_t>(j)] == (d % 2 ? -1.0 : 1.0) * c[static_cast<std::size_t>(w - 1 - j)]);
@@ -63,8 +65,11 @@ TEST_CASE("SavgolFilter: 3 s trial position, window 225 order 5 (30 Hz), deriv 0
   const auto x = manip::dsp::test::quantised_signal("dsp/trial_position.txt");
   REQUIRE(x.size() == 12000);
   std::vector<double> y(x.size());
+  const bool avx2 = GENERATE(false, true);
+  manip::dsp::detail::savgol_allow_avx2(avx2);
+  const std::string kernel = manip::dsp::detail::savgol_uses_avx2() ? " [avx2]" : " [portable]";
   for (int d = 0; d <= 3; ++d) {
-    INFO("deriv " << d);
+    INFO("deriv " << d << kernel);
     const SavgolFilter f(225, 5, d, 1.0 / 4000.0);
     f.apply(x, y);
     Numbers in("dsp/savgol_trial_w225_d" + std::to_string(d) + ".txt");
@@ -82,10 +87,12 @@ TEST_CASE("SavgolFilter: 3 s trial position, window 225 order 5 (30 Hz), deriv 0
     const double e_exact = norm_error(got, exact);
     const double e_rel = rel_error(got, exact);
     const double e_scipy = norm_error(got, scipy);
-    CHECK(e_exact <= 1e-11);
-    CHECK(e_rel <= 1e-9);
-    CHECK(e_scipy <= 1e-6);
+    const std::string tag = "savgol trial W225 p5 d" + std::to_string(d) + kernel;
+    CHECK(observed(tag + " vs exact (normwise)", e_exact) <= 1e-11);
+    CHECK(observed(tag + " vs exact (per sample)", e_rel) <= 1e-9);
+    CHECK(observed(tag + " vs scipy (normwise)", e_scipy) <= 1e-6);
   }
+  manip::dsp::detail::savgol_allow_avx2(true);
 }
 
 TEST_CASE("SavgolFilter: small windows on short signals, full outputs incl. both edges") {
@@ -101,10 +108,15 @@ TEST_CASE("SavgolFilter: small windows on short signals, full outputs incl. both
     const auto exact = in.take(n);
     const auto scipy = in.take(n);
     INFO("window " << w << " order " << p << " deriv " << d << " n " << n);
-    std::vector<double> y(n);
+    std::vector<double> y(n), y_portable(n);
     SavgolFilter(w, p, d, delta).apply(x, y);
-    CHECK(norm_error(y, exact) <= 1e-12);
-    CHECK(norm_error(y, scipy) <= 1e-12);
+    manip::dsp::detail::savgol_allow_avx2(false);
+    SavgolFilter(w, p, d, delta).apply(x, y_portable);
+    manip::dsp::detail::savgol_allow_avx2(true);
+    CHECK(norm_error(y_portable, exact) <= 1e-12);
+    const std::string tag = "savgol small W" + std::to_string(w) + " p" + std::to_string(p) + " d" + std::to_string(d);
+    CHECK(observed(tag + " vs exact", norm_error(y, exact)) <= 1e-12);
+    CHECK(observed(tag + " vs scipy", norm_error(y, scipy)) <= 1e-12);
     ++cases;
   }
   CHECK(cases == 9);
@@ -135,7 +147,7 @@ TEST_CASE("SavgolFilter: reproduces polynomials of degree <= polyorder and their
       scale = std::max(scale, std::fabs(want));
     }
     INFO("deriv " << d);
-    CHECK(worst / scale <= 1e-9);
+    CHECK(observed("savgol polynomial reproduction d" + std::to_string(d), worst / scale) <= 1e-9);
   }
   // deriv > polyorder: identically zero (scipy returns zero coefficients).
   SavgolFilter(11, 2, 3, 1.0).apply(x, y);
@@ -180,7 +192,9 @@ TEST_CASE("savgol cut-off: -3 dB points vs exact references and the platform fac
     const int w = in.next_int();
     const double f = in.next();
     INFO("window " << w);
-    CHECK(savgol_cutoff_hz(w, 5, 4000.0) == Approx(f).epsilon(1e-9));
+    const double got = savgol_cutoff_hz(w, 5, 4000.0);
+    observed("savgol -3 dB W" + std::to_string(w) + " rel error", std::fabs(got - f) / f);
+    CHECK(got == Approx(f).epsilon(1e-9));
   }
   // Platform facts, order 5 at 4 kHz (one decimal).
   CHECK(savgol_cutoff_hz(221, 5, 4000.0) == Approx(30.6).margin(0.05));

@@ -91,4 +91,14 @@ class SavgolFilter {
 // Throws std::invalid_argument unless fs_hz > 0, 0 < fc_hz < fs_hz / 2, polyorder >= 0.
 [[nodiscard]] int savgol_window_for_cutoff(double fs_hz, double fc_hz, int polyorder);
 
+namespace detail {
+// SavgolFilter::apply uses an AVX2+FMA kernel when the CPU has it (x86-64,
+// GCC/Clang) and a portable SSE2/vector-extension kernel otherwise; the two
+// differ at the last-ulp level (FMA rounds once). For tests and for runs that
+// must be bit-reproducible across machines: allow=false forces the portable
+// kernel process-wide.
+void savgol_allow_avx2(bool allow);
+[[nodiscard]] bool savgol_uses_avx2();
+}  // namespace detail
+
 }  // namespace manip::dsp

@@ -23,7 +23,8 @@ struct Psd {
 // Throws std::invalid_argument for fs_hz <= 0, nperseg < 1, noverlap >= nperseg
 // (or < -1), nfft < nperseg. Empty x gives an empty Psd (as scipy).
 // Allocates (result, one segment buffer, FFT plan cache per thread).
-// FFT: Eigen's kissfft, mixed radix; fast for nfft with small prime factors.
+// FFT: built-in radix-2 for power-of-two nfft (fast: use these), Eigen's
+// kissfft (mixed radix, ~10x slower, O(n^2) for large prime factors) otherwise.
 [[nodiscard]] Psd welch(std::span<const double> x, double fs_hz, const WelchOptions& opt = {});
 
 }  // namespace manip::dsp

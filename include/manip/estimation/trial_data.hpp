@@ -44,7 +44,9 @@ struct TrialData {
   std::vector<Vec2> f_sensor_n;  // force of the hand side on the sensor
   std::vector<Vec2> u_pert_n;    // perturbation force command
   std::vector<Vec2> x_ref_m;     // admittance reference position
-  std::vector<Vec2> x_twin_m;    // reference position of the unperturbed twin (simulated logs only), same indices; may be empty
+  std::vector<Vec2> xd_ref_m, xdd_ref_m;  // and its velocity, acceleration
+  // Unperturbed twin (simulated logs only), same indices; empty otherwise.
+  std::vector<Vec2> x_twin_m, xd_twin_m, xdd_twin_m;
   bool has_truth{false};
   Mat2 truth_m_kg{Mat2::Zero()}, truth_d_nspm{Mat2::Zero()}, truth_k_npm{Mat2::Zero()};
   std::string truth_model;

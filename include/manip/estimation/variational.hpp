@@ -32,7 +32,8 @@ struct VariationalWindow {
   std::vector<Vec2> du_ext_adm;      // eq. 21
   std::vector<Vec2> du_ext_force;    // from the force sensor
   std::vector<Vec2> u_pert;          // applied perturbation
-  std::vector<Vec2> dx_true;         // twin difference (simulated logs), else empty
+  // Twin differences (simulated logs), else empty: the truth of Fig. 4.
+  std::vector<Vec2> dx_true, dxd_true, dxdd_true, du_ext_true;
   [[nodiscard]] std::size_t size() const { return dx.size(); }
 };
 

@@ -20,8 +20,12 @@
 //                homonymous (a muscle responds to its own stretch), own delay and gains
 //   noise        a = max(0, u + (sigma_0 + cv * max(0, u)) .* nu)            (eq. 3)
 //                nu: per-muscle Ornstein-Uhlenbeck process (zero-mean, unit stationary
-//                variance, correlation time tau): Brownian motion with mean reversion, so
-//                the noise is zero-mean and bounded over a trial; signal-dependent via cv.
+//                variance, correlation time tau, exact update per step, started in its
+//                stationary distribution): Brownian motion with mean reversion, so the
+//                noise is zero-mean and bounded over a trial; signal-dependent via cv.
+//                nu comes from GaussianSource seeded by begin_trial's seed: paired runs
+//                share nu exactly (its amplitude follows each run's own command).
+//                Activations are in tension units [N] (eq. 33: m_A = a).
 //   tension      m = max(0, a + D_m ed_m + K_m e_m),  K_m = K0 + K1 a,  D_m = K_m / r
 //                (eq. 33-35, r = 12 in the paper). A muscle cannot push: a slack muscle
 //                has zero tension, stiffness and damping.
@@ -48,6 +52,7 @@
 //   D = J^-T Dq J^-1 - M_x (H1 + Jd) J^-1
 //   K = J^-T (Kq - G) J^-1 - M_x (H2 + L) J^-1 - D H1 J^-1
 //   Dq = A diag(D_m) A^T + dC/dqd,  Kq = A diag(K_m) A^T + dC/dq + d(M_q qdd)/dq
+//   (slack muscles excluded from diag(.)),
 //   G = d(J^T)/dq u_ext, H1 = dJ/dq qd, H2 = dJ/dq qdd, L = d(Jd qd)/dq
 // (xdd, u_ext at the operating point: the acceleration the plant imposed last).
 // It contains the intrinsic muscle impedance and every geometric term the paper
@@ -60,7 +65,6 @@
 #include <array>
 #include <cstdint>
 #include <optional>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -77,6 +81,27 @@ inline constexpr int kMuscles = 6;  // shoulder flexor, shoulder extensor, elbow
                                     // elbow extensor, biarticular flexor, biarticular extensor
 using MuscleVec = Eigen::Matrix<double, kMuscles, 1>;
 using MomentArms = Eigen::Matrix<double, 2, kMuscles>;  // rows: shoulder, elbow [m]
+
+// Deterministic standard-normal source for the motor noise: xoshiro256++
+// (Blackman & Vigna 2018) seeded through splitmix64, and the 128-layer ziggurat
+// (Marsaglia & Tsang 2000; layer index and value from separate bits of one 64-bit
+// draw, avoiding the original's correlation, Doornik 2005). 4-9 ns per draw here
+// against 30-40 ns for std::normal_distribution + std::mt19937_64 (whose output is
+// implementation-defined: this one is identical on every platform). No allocation.
+class GaussianSource {
+ public:
+  GaussianSource();
+  void seed(std::uint64_t s);
+  double operator()();
+  std::uint64_t next_u64();
+
+ private:
+  double uniform_open();  // (0, 1)
+  double tail(std::int64_t hz, unsigned iz);
+  std::array<std::uint64_t, 4> s_{};
+  std::array<std::uint32_t, 128> kn_{};
+  std::array<double, 128> wn_{}, fn_{};
+};
 
 enum class Pathway : int { kShortLatency = 0, kLongLatency = 1, kVoluntary = 2 };
 inline constexpr int kPathways = 3;
@@ -108,7 +133,7 @@ struct NeuromechParams {
   std::array<FeedbackPathwayParams, kPathways> feedback{{
       {false, 0.025, 1000.0, 50.0},    // short-latency
       {true, 0.060, 2000.0, 150.0},    // long-latency = the paper's single 60 ms PD
-      {false, 0.120, 3000.0, 300.0},   // voluntary
+      {false, 0.120, 2000.0, 300.0},   // voluntary
   }};
   double noise_cv{0.03};          // signal-dependent noise: std per unit activation
   double noise_floor_n{0.0};      // signal-independent part [N]
@@ -172,6 +197,7 @@ class NeuromechanicalArm final : public HumanModel, public TruthSource {
   [[nodiscard]] MuscleVec feedforward_activations_n() const { return plan_.a_ff; }
   [[nodiscard]] MuscleVec tensions_n() const;
   [[nodiscard]] Vec2 planned_hand_position_m() const { return plan_.x; }
+  [[nodiscard]] JointState planned_joint_state() const { return JointState{plan_.q, plan_.qd}; }
   // Kinetic energy of the arm segments [J].
   [[nodiscard]] double kinetic_energy_j() const { return arm_.kinetic_energy(js_.q_rad, js_.qd_radps); }
 
@@ -181,24 +207,41 @@ class NeuromechanicalArm final : public HumanModel, public TruthSource {
     Vec2 q{Vec2::Zero()}, qd{Vec2::Zero()};
     MuscleVec a_ff{MuscleVec::Zero()};
   };
+  struct Posture {  // trigonometry of one posture and the matrices of eq. 1 (one sincos per angle)
+    double s1{0}, c1{1}, s12{0}, c12{1}, s2{0}, c2{1};
+    Mat2 j{Mat2::Identity()}, jinv{Mat2::Identity()}, mq{Mat2::Identity()};
+    Vec2 x{Vec2::Zero()};
+  };
   struct Muscles {  // muscle quantities at one state
     MuscleVec a, k, d, tension;
     MuscleVec dtension_du;  // d tension / d drive u (activation clamp, noise gain, K1 e terms)
     MuscleVec active;  // 1 if tension > 0 (stiffness and damping act), else 0
   };
 
+  [[nodiscard]] Posture posture(const Vec2& q) const;
+  [[nodiscard]] Posture finish_posture(Posture k) const;  // j, jinv, mq, x from the sines/cosines
+  // Inverse kinematics (elbow-right branch, as TwoLinkArm) without sin/cos: the
+  // posture's sines and cosines follow algebraically from x. False if out of reach.
+  bool posture_at_hand(const Vec2& x, Vec2& q, Posture& k) const;
+  [[nodiscard]] Mat2 jacobian_dot(const Posture& k, const Vec2& qd) const;  // TwoLinkArm::jacobian_dot
+  [[nodiscard]] Vec2 coriolis(const Posture& k, const Vec2& qd) const;      // TwoLinkArm::coriolis
+  void set_q(const Vec2& q);                   // js_.q_rad and pose_
   void update_plan();                          // plan_ for step_
   void push_error();                           // tracking error of step_ into the delay line
   void fill_delay_line();
   [[nodiscard]] MuscleVec feedback_drive() const;
   [[nodiscard]] Muscles muscles_at(const Vec2& q, const Vec2& qd) const;
-  void dynamics_at(const Vec2& q, const Vec2& qd, Mat2& m_x, Vec2& h) const;
+  void dynamics_at(const Posture& k, const Vec2& q, const Vec2& qd, Mat2& m_x, Vec2& h) const;
   [[nodiscard]] MuscleVec distribute(const Vec2& tau_nm);
 
   NeuromechParams p_;
   TwoLinkArm arm_;
   ReachSpec reach_{};
   JointState js_{};
+  Posture pose_{};  // of js_.q_rad
+  double m_a_{0}, m_b_{0}, m_d_{0};  // M_q = [[a + 2 b c2, d + b c2], [d + b c2, d]]
+  Mat2 aat_inv_{Mat2::Identity()};   // (A A^T)^-1: muscle distribution with every muscle active
+  Vec2 a_tonic_torque_{Vec2::Zero()};  // A a_tonic
   std::int64_t step_{0};
   Plan plan_{};
   Vec2 lambda_{Vec2::Zero()};  // warm start of the muscle-distribution solver
@@ -208,8 +251,7 @@ class NeuromechanicalArm final : public HumanModel, public TruthSource {
   std::vector<double> ring_;  // per step: q - q_d (2), qd - qd_d (2)
   MuscleVec noise_{MuscleVec::Zero()};
   double noise_rho_{0.0}, noise_sigma_{0.0};  // exact OU update coefficients per step
-  std::mt19937_64 rng_{};
-  std::normal_distribution<double> gauss_{0.0, 1.0};
+  GaussianSource gauss_{};
 };
 
 }  // namespace manip::sim

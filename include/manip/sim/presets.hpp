@@ -8,7 +8,9 @@
 
 namespace manip::sim {
 
-enum class NoiseLevel { none, realistic };
+// quantisation / motor / variability: one source of `realistic` alone (for
+// attributing the error of the accuracy study to its cause).
+enum class NoiseLevel { none, quantisation, motor, variability, realistic };
 
 // Sensor and movement variability of a lab session:
 //   none:      no quantisation, no noise, identical 3 s reaches

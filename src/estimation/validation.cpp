@@ -1,0 +1,118 @@
+#include "manip/estimation/validation.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <sstream>
+#include <stdexcept>
+
+namespace manip::estimation {
+
+NrmseCurves nrmse_curves(const std::vector<VariationalWindow>& ws, double t_norm_s, int n_points) {
+  NrmseCurves c;
+  std::vector<const VariationalWindow*> use;
+  for (const auto& w : ws)
+    if (!w.dx_true.empty()) use.push_back(&w);
+  if (use.empty()) throw std::invalid_argument("no trial carries twin truth (not a simulated log?)");
+  c.n_trials = static_cast<int>(use.size());
+  const double fs = use.front()->fs_hz;
+  for (int i = 1; i <= n_points; ++i) c.dt_s.push_back(t_norm_s * i / n_points);
+  for (int s = 0; s < 4; ++s) {
+    c.mean[static_cast<std::size_t>(s)].assign(c.dt_s.size(), Vec2::Zero());
+    c.std[static_cast<std::size_t>(s)].assign(c.dt_s.size(), Vec2::Zero());
+  }
+  for (int s = 0; s < 4; ++s) {
+    std::vector<std::vector<Vec2>> per_trial;
+    for (const auto* w : use) {
+      const auto& est = s == 0 ? w->dx : s == 1 ? w->dxd : s == 2 ? w->dxdd : w->du_ext_adm;
+      const auto& tru = s == 0 ? w->dx_true : s == 1 ? w->dxd_true : s == 2 ? w->dxdd_true : w->du_ext_true;
+      const auto n_norm = std::min(w->size(), static_cast<std::size_t>(std::llround(t_norm_s * fs)) + 1);
+      Vec2 peak = Vec2::Zero();
+      for (std::size_t k = 0; k < n_norm; ++k) peak = peak.cwiseMax(tru[k].cwiseAbs());
+      std::vector<Vec2> curve;
+      for (double dt : c.dt_s) {
+        const auto n = std::min(w->size(), static_cast<std::size_t>(std::llround(dt * fs)) + 1);
+        Vec2 se = Vec2::Zero();
+        for (std::size_t k = 0; k < n; ++k) se += (est[k] - tru[k]).cwiseAbs2();
+        curve.push_back((se / static_cast<double>(n)).cwiseSqrt().cwiseQuotient(peak));
+      }
+      per_trial.push_back(curve);
+    }
+    auto& m = c.mean[static_cast<std::size_t>(s)];
+    auto& sd = c.std[static_cast<std::size_t>(s)];
+    for (const auto& cv : per_trial)
+      for (std::size_t i = 0; i < cv.size(); ++i) m[i] += cv[i] / static_cast<double>(per_trial.size());
+    for (const auto& cv : per_trial)
+      for (std::size_t i = 0; i < cv.size(); ++i) sd[i] += (cv[i] - m[i]).cwiseAbs2();
+    for (auto& v : sd) v = (v / std::max<double>(1.0, static_cast<double>(per_trial.size()) - 1.0)).cwiseSqrt();
+  }
+  return c;
+}
+
+nlohmann::json to_json(const NrmseCurves& c) {
+  nlohmann::json j;
+  j["dt_s"] = c.dt_s;
+  j["n_trials"] = c.n_trials;
+  for (std::size_t s = 0; s < 4; ++s) {
+    nlohmann::json sig;
+    for (int a = 0; a < 2; ++a) {
+      std::vector<double> mv, sv;
+      for (std::size_t i = 0; i < c.dt_s.size(); ++i) {
+        mv.push_back(c.mean[s][i](a));
+        sv.push_back(c.std[s][i](a));
+      }
+      sig["x" + std::to_string(a + 1)] = {{"mean", mv}, {"std", sv}};
+    }
+    j[NrmseCurves::kSignals[s]] = sig;
+  }
+  return j;
+}
+
+std::string format_text(const NrmseCurves& c) {
+  std::ostringstream o;
+  o << "NRMSE at " << c.dt_s.back() * 1000 << " ms (mean (std) over " << c.n_trials
+    << " trials; paper Fig. 4: dx, dxd < 5 %, dxdd < 7.5 %, du_ext < 15 %):\n";
+  for (std::size_t s = 0; s < 4; ++s) {
+    const auto& m = c.mean[s].back();
+    const auto& sd = c.std[s].back();
+    o << "  " << std::left << std::setw(7) << NrmseCurves::kSignals[s] << std::right << std::fixed << std::setprecision(2)
+      << " x1 " << m(0) * 100 << " % (" << sd(0) * 100 << ")   x2 " << m(1) * 100 << " % (" << sd(1) * 100 << ")\n";
+  }
+  return o.str();
+}
+
+void write_nrmse_plot(const NrmseCurves& c, const std::string& path) {
+  std::ofstream o(path);
+  if (!o) throw std::runtime_error(path + ": cannot write plot");
+  const double W = 640, H = 400, L = 60, R = 160, T = 40, B = 50;
+  double ymax = 0.0;
+  for (std::size_t s = 0; s < 4; ++s)
+    for (const auto& v : c.mean[s]) ymax = std::max(ymax, v.maxCoeff() * 100);
+  ymax = std::max(ymax * 1.1, 1.0);
+  auto px = [&](double t) { return L + t / c.dt_s.back() * (W - L - R); };
+  auto py = [&](double y) { return T + (1 - y / ymax) * (H - T - B); };
+  o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H
+    << "' font-family='sans-serif' font-size='12'><rect width='100%' height='100%' fill='white'/>\n"
+    << "<text x='" << W / 2 << "' y='20' text-anchor='middle' font-size='14'>NRMSE of the estimated variational dynamics (Fig. 4)</text>\n"
+    << "<rect x='" << L << "' y='" << T << "' width='" << W - L - R << "' height='" << H - T - B << "' fill='none' stroke='black'/>\n";
+  for (int i = 0; i <= 4; ++i) {
+    o << "<text x='" << px(c.dt_s.back() * i / 4) << "' y='" << H - B + 15 << "' text-anchor='middle'>"
+      << std::lround(c.dt_s.back() * i / 4 * 1000) << "</text>";
+    o << "<text x='" << L - 5 << "' y='" << py(ymax * i / 4) + 4 << "' text-anchor='end'>" << std::setprecision(3)
+      << ymax * i / 4 << "</text>\n";
+  }
+  o << "<text x='" << (L + W - R) / 2 << "' y='" << H - 12 << "' text-anchor='middle'>Δt [ms]</text>"
+    << "<text x='15' y='" << H / 2 << "' transform='rotate(-90 15 " << H / 2 << ")' text-anchor='middle'>NRMSE [%]</text>\n";
+  const char* colors[4] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728"};
+  int li = 0;
+  for (std::size_t s = 0; s < 4; ++s)
+    for (int a = 0; a < 2; ++a, ++li) {
+      o << "<polyline fill='none' stroke='" << colors[s] << "' stroke-dasharray='" << (a ? "4,3" : "none") << "' points='";
+      for (std::size_t i = 0; i < c.dt_s.size(); ++i) o << px(c.dt_s[i]) << ',' << py(c.mean[s][i](a) * 100) << ' ';
+      o << "'/><text x='" << W - R + 10 << "' y='" << T + 15 + 16 * li << "' fill='" << colors[s] << "'>"
+        << NrmseCurves::kSignals[s] << " x" << a + 1 << "</text>\n";
+    }
+  o << "</svg>\n";
+}
+
+}  // namespace manip::estimation

@@ -1,0 +1,60 @@
+// The manip_rt executable's exit codes (skipped when the app is not built).
+#include <catch2/catch.hpp>
+
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace {
+const std::string kApp = std::string(MANIP_BINARY_DIR) + "/apps/manip_rt";
+
+int run(const std::string& args, std::string* output = nullptr) {
+  const std::string out = (std::filesystem::temp_directory_path() / "manip_rt_cli_out.txt").string();
+  const std::string cmd = "cd " + std::string(MANIP_SOURCE_DIR) + " && " + kApp + " " + args + " >" + out + " 2>&1";
+  const int st = std::system(cmd.c_str());
+  if (output) {
+    std::ifstream in(out);
+    std::ostringstream os;
+    os << in.rdbuf();
+    *output = os.str();
+  }
+  std::filesystem::remove(out);
+  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+}  // namespace
+
+TEST_CASE("manip_rt: exit codes of the executable", "[cli]") {
+  if (!std::filesystem::exists(kApp)) {
+    WARN("manip_rt not built: skipped (ninja manip_rt)");
+    return;
+  }
+  std::string out;
+  CHECK(run("--help", &out) == 0);
+  CHECK(out.find("Exit codes:") != std::string::npos);
+  CHECK(run("--backend can --log /tmp/never.lcm", &out) == 4);
+  CHECK(out.find("not implemented") != std::string::npos);
+  CHECK(run("--no-such-flag", &out) == 2);
+
+  const std::string bad = (std::filesystem::temp_directory_path() / "manip_rt_bad.yaml").string();
+  {
+    std::ifstream in(std::string(MANIP_SOURCE_DIR) + "/config/rt.yaml");
+    std::ostringstream os;
+    os << in.rdbuf();
+    std::ofstream o(bad);
+    o << os.str() << "\nunexpected_section: 1\n";
+  }
+  CHECK(run("--config " + bad + " --log /tmp/never.lcm", &out) == 3);
+  CHECK(out.find(bad + ":") != std::string::npos);
+  CHECK(out.find("unexpected_section: unknown key") != std::string::npos);
+  std::filesystem::remove(bad);
+
+  const std::string log = (std::filesystem::temp_directory_path() / "manip_rt_cli.lcm").string();
+  CHECK(run("--trials 2 --lcm-url none --quiet --force --log " + log, &out) == 0);
+  CHECK(std::filesystem::file_size(log) > 1000000u);
+  CHECK(run("--trials 2 --lcm-url none --quiet --log " + log, &out) == 6);  // exists, no --force
+  std::filesystem::remove(log);
+}
