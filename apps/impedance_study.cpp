@@ -55,6 +55,8 @@ int main(int argc, char** argv) {
   app.add_option("--oe-poly-order", oe_poly, "output-error polynomial order (default: estimator default)");
   app.add_option("--oe-pre", oe_pre, "output-error data before onset [s] (default: estimator default)");
   app.add_option("--methods", methods, "comma list of methods or 'all'");
+  int prewhiten = -1;
+  app.add_option("--oe-prewhiten", prewhiten, "output-error prewhitening AR order (default: estimator default)");
   CLI11_PARSE(app, argc, argv);
   auto split = [](const std::string& s) {
     std::vector<std::string> out;
@@ -83,6 +85,7 @@ int main(int argc, char** argv) {
         es.methods = methods == "all" ? estimation::all_methods() : split(methods);
         if (oe_poly >= 0) es.oe.poly_order = oe_poly;
         if (oe_pre >= 0) es.oe.t_pre_s = oe_pre;
+        if (prewhiten >= 0) es.oe.prewhiten_order = prewhiten;
         estimation::SessionEstimator se(es);
         estimation::TrialAssembler asmb(
             [&](const estimation::SessionInfo& info, estimation::TrialData&& t) { se.add_trial(info, std::move(t)); });

@@ -240,8 +240,10 @@ const ActuatorCommand& Controller::step(const SensorReading& in, std::int64_t cy
   copy2(state_.f_motor_n, held_force_);
   state_.mode = static_cast<std::int8_t>(m);
   state_.fault_flags = static_cast<std::int32_t>(sm_.latched());
-  push_record(LoopRecord(state_), cycle % bus_decimation_ == 0);
+  // Order in the queues (and the log): command results, trial events of this
+  // cycle, the state, then a fault record (whose history ends with this state).
   for (int i = 0; i < events_.n; ++i) push_record(LoopRecord(events_.ev[static_cast<std::size_t>(i)]), true);
+  push_record(LoopRecord(state_), cycle % bus_decimation_ == 0);
   if (have_pending_fault_) {
     pending_fault_.fault_flags = sm_.latched();
     pending_fault_.mode = m;

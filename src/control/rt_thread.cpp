@@ -74,6 +74,16 @@ void prefault_stack(std::size_t bytes) {
   buf[0] = buf[0];
 }
 
+void avoid_cpu(int cpu) {
+  if (cpu < 0) return;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) != 0) return;
+  if (!CPU_ISSET(cpu, &set) || CPU_COUNT(&set) < 2) return;
+  CPU_CLR(cpu, &set);
+  pthread_setaffinity_np(pthread_self(), sizeof set, &set);
+}
+
 bool configure_rt_thread(const RtThreadOptions& o, std::string& err) {
   bool ok = true;
   if (o.cpu >= 0) {

@@ -315,13 +315,16 @@ int savgol_window_for_cutoff(double fs_hz, double fc_hz, int polyorder) {
   auto cutoff = [&](long m) { return savgol_cutoff_hz(window_of(m), polyorder, fs_hz); };
   if (cutoff(0) <= fc_hz) return w_min;
   // Bracket the first window index with cutoff <= fc, then bisect.
-  constexpr long kMaxWindow = 1L << 24;
+  // 2^18 samples is over a minute at 4 kHz (fc ~0.03 Hz for order 5); the
+  // design's QR needs window x (polyorder+1) doubles, so stop well before
+  // memory becomes an issue.
+  constexpr long kMaxWindow = 1L << 18;
   long lo = 0, hi = 1;
   while (cutoff(hi) > fc_hz) {
     lo = hi;
     hi *= 2;
     if (w_min + 2 * hi > kMaxWindow)
-      throw std::invalid_argument("savgol_window_for_cutoff: fc too low for windows below 2^24 samples");
+      throw std::invalid_argument("savgol_window_for_cutoff: fc too low for windows below 2^18 samples");
   }
   while (hi - lo > 1) {
     const long mid = lo + (hi - lo) / 2;

@@ -208,6 +208,7 @@ namespace {
 
 struct OeProblem {
   std::span<const OeWindow> windows;
+  std::vector<double> ar;              // whitening filter 1 + a1 q^-1 + ... (empty: none)
   std::vector<Eigen::MatrixXd> basis;  // orthonormal polynomial basis per window
   std::vector<Eigen::VectorXd> y_perp; // projected measurement per window, both axes stacked
   Eigen::Index rows{0};
@@ -239,6 +240,15 @@ struct OeProblem {
     out.tail(n) = y.tail(n) - q * (q.transpose() * y.tail(n));
     return out;
   }
+  // In place e[k] <- e[k] + sum_j a_j e[k-j], zero initial conditions.
+  void whiten(Eigen::Ref<Eigen::VectorXd> e) const {
+    const auto p = static_cast<Eigen::Index>(ar.size());
+    for (Eigen::Index k = e.size() - 1; k >= 0; --k) {
+      double v = e(k);
+      for (Eigen::Index j = 1; j <= p && j <= k; ++j) v += ar[static_cast<std::size_t>(j - 1)] * e(k - j);
+      e(k) = v;
+    }
+  }
   static void unpack(const Eigen::VectorXd& th, Mat2& d, Mat2& k) {
     d << th(0), th(1), th(2), th(3);
     k << th(4), th(5), th(5), th(6);
@@ -263,6 +273,7 @@ struct OeProblem {
         s(n + i) = sim[static_cast<std::size_t>(i)].y();
       }
       r.segment(off, 2 * n) = y_perp[wi] - project(basis[wi], s);
+      if (!ar.empty()) whiten(r.segment(off, n)), whiten(r.segment(off + n, n));
       off += 2 * n;
     }
     return r;
@@ -332,10 +343,36 @@ LmResult levenberg_marquardt(const OeProblem& prob, Eigen::VectorXd th, int skip
 
 ImpedanceEstimate fit_output_error(std::span<const OeWindow> windows, const OeSettings& s) {
   if (windows.empty()) throw std::invalid_argument("output-error fit: no perturbed trials");
-  const OeProblem prob(windows, s.poly_order);
+  OeProblem prob(windows, s.poly_order);
   Eigen::VectorXd th0(7);
   th0 << 10.0, 0.0, 0.0, 10.0, 200.0, 0.0, 200.0;  // a generic arm; LM moves far from it
-  const auto fit = levenberg_marquardt(prob, th0, -1, s.max_iterations);
+  auto fit = levenberg_marquardt(prob, th0, -1, s.max_iterations);
+  if (s.prewhiten_order > 0) {
+    // Yule-Walker on the first fit's residuals, pooled over windows and axes.
+    const int p = s.prewhiten_order;
+    std::vector<double> acf(static_cast<std::size_t>(p + 1), 0.0);
+    Eigen::Index off = 0;
+    for (const auto& w : windows) {
+      const auto n = static_cast<Eigen::Index>(w.x_m.size());
+      for (int axis = 0; axis < 2; ++axis) {
+        const auto seg = fit.res.segment(off + axis * n, n);
+        for (int lag = 0; lag <= p; ++lag)
+          for (Eigen::Index k = lag; k < n; ++k) acf[static_cast<std::size_t>(lag)] += seg(k) * seg(k - lag);
+      }
+      off += 2 * n;
+    }
+    Eigen::MatrixXd r(p, p);
+    Eigen::VectorXd rhs(p);
+    for (int i = 0; i < p; ++i) {
+      rhs(i) = -acf[static_cast<std::size_t>(i + 1)];
+      for (int j = 0; j < p; ++j) r(i, j) = acf[static_cast<std::size_t>(std::abs(i - j))];
+    }
+    const Eigen::VectorXd a = r.ldlt().solve(rhs);
+    if (a.allFinite()) {
+      prob.ar.assign(a.data(), a.data() + a.size());
+      fit = levenberg_marquardt(prob, fit.theta, -1, s.max_iterations);
+    }
+  }
   ImpedanceEstimate e;
   Mat2 d, k;
   OeProblem::unpack(fit.theta, d, k);
@@ -377,6 +414,7 @@ ImpedanceEstimate fit_output_error(std::span<const OeWindow> windows, const OeSe
   e.residual_rms = std::sqrt(fit.res.squaredNorm() / static_cast<double>(prob.rows));
   double var_y = 0.0;
   for (const auto& y : prob.y_perp) var_y += y.squaredNorm();
+  if (!prob.ar.empty()) var_y = prob.residual(Eigen::VectorXd::Zero(7), -1).squaredNorm();  // whitened scale
   e.vaf = var_y > 0 ? 1.0 - fit.res.squaredNorm() / var_y : 0.0;
   e.condition = column_normalised_condition(fit.jac);
   e.n_samples = static_cast<int>(prob.rows / 2);

@@ -144,7 +144,8 @@ nlohmann::json settings_to_json(const EstimatorSettings& s) {
           {"oe_t_est_s", s.oe.t_est_s},
           {"oe_poly_order", s.oe.poly_order},
           {"oe_max_iterations", s.oe.max_iterations},
-          {"oe_jackknife", s.oe.jackknife}};
+          {"oe_jackknife", s.oe.jackknife},
+          {"oe_prewhiten_order", s.oe.prewhiten_order}};
 }
 
 nlohmann::json to_json(const Report& r, const std::string& log_name) {
@@ -401,6 +402,7 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
     else if (key == "oe_poly_order") D(s.oe.poly_order);
     else if (key == "oe_max_iterations") D(s.oe.max_iterations);
     else if (key == "oe_jackknife") D(s.oe.jackknife);
+    else if (key == "oe_prewhiten_order") D(s.oe.prewhiten_order);
     else throw std::runtime_error(path + ": " + key + ": unknown key");
   }
   auto bad = [&](bool cond, const char* key, const char* why) {
@@ -416,6 +418,7 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
   bad(!(s.oe.t_pre_s >= 0 && s.oe.t_pre_s <= 0.5), "oe_t_pre_s", "must be in [0, 0.5] s");
   bad(s.oe.poly_order < 0 || s.oe.poly_order > 8, "oe_poly_order", "must be 0..8");
   bad(s.oe.max_iterations < 1, "oe_max_iterations", "must be >= 1");
+  bad(s.oe.prewhiten_order < 0 || s.oe.prewhiten_order > 20, "oe_prewhiten_order", "must be 0..20");
   return s;
 }
 

@@ -55,6 +55,18 @@ Summary summarise_trials(const std::string& method, const std::string& group, co
   if (rs.size() < 2) {
     s.identifiable = false;
     s.flag = "a single trial: no spread";
+  } else {
+    // The same rule as for a single fit, applied to the standard error of the mean.
+    ImpedanceEstimate e;
+    e.d_nspm = s.d_nspm;
+    e.k_npm = s.k_npm;
+    e.d_se = s.d_spread / std::sqrt(n);
+    e.k_se = s.k_spread / std::sqrt(n);
+    flag_identifiability(e);
+    if (!e.identifiable) {
+      s.identifiable = false;
+      s.flag = "standard error of the mean: " + e.flag;
+    }
   }
   if (s.n_flagged_trials * 2 > s.n_trials) {
     s.identifiable = false;
@@ -102,6 +114,8 @@ void SessionEstimator::add_trial(const SessionInfo& info, TrialData&& t) {
     have_info_ = true;
   }
   ++n_trials_;
+  // The window rule costs ~1 ms: resolve it once per session (recorded in the report's settings).
+  if (s_.pipeline.sg_window <= 0) s_.pipeline.sg_window = sg_window_for(s_.pipeline, info.fs_hz);
   // PSD of the principal-axis jerk with one segment spanning the trial
   // (zero-padded to a common nfft so all trials share one frequency grid).
   const auto j = principal_axis_jerk(info, t, s_.pipeline);

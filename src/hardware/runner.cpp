@@ -157,9 +157,18 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
   // --- threads -------------------------------------------------------------------
   std::atomic<bool> logger_stop{false}, bus_stop{false}, loop_done{false};
   std::thread logger_thread;
-  if (want_log) logger_thread = std::thread([&] { logger.run(logger_stop); });
+  const int avoid = opt.realtime ? cfg.loop.cpu : -1;  // keep the helpers off the loop's CPU
+  if (want_log)
+    logger_thread = std::thread([&] {
+      control::avoid_cpu(avoid);
+      logger.run(logger_stop);
+    });
   std::thread bus_thread;
-  if (bus) bus_thread = std::thread([&] { bus->run(bus_stop); });
+  if (bus)
+    bus_thread = std::thread([&] {
+      control::avoid_cpu(avoid);
+      bus->run(bus_stop);
+    });
 
   RtCycle body(backend, ctl);
   std::string rt_warning;

@@ -15,13 +15,32 @@ thread_local bool g_counting = false;
 thread_local long g_allocs = 0;
 }  // namespace
 
-void* operator new(std::size_t n) {
+// Every unaligned form is replaced, so that all of them pair malloc with free
+// (ASan reports new/free mismatches if e.g. the nothrow form, used by
+// std::stable_sort's temporary buffer, were left to the runtime).
+namespace {
+void* counted_malloc(std::size_t n) noexcept {
   if (g_counting) ++g_allocs;
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
+  return std::malloc(n == 0 ? 1 : n);
+}
+}  // namespace
+
+void* operator new(std::size_t n) {
+  if (void* p = counted_malloc(n)) return p;
   throw std::bad_alloc();
 }
+void* operator new[](std::size_t n) {
+  if (void* p = counted_malloc(n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return counted_malloc(n); }
+void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return counted_malloc(n); }
 void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
+void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
 
 namespace {
 template <class F>

@@ -21,10 +21,10 @@ using manip::dsp::test::rel_error;
 // result (rational arithmetic, rounded once) and scipy's output. scipy's
 // savgol_coeffs factorises the unscaled Vandermonde matrix of -h..h
 // (condition ~1e11 for window 225, order 5): its coefficients are off by up
-// to 3.7e-8 and its filtered derivatives by up to 3.2e-7 of their peak
-// (fixture headers). We therefore hold the C++ result to the exact value at
-// 1e-11 (observed ~1e-14) and to scipy at scipy's own error; for small windows
-// scipy is exact to ~1e-14 and both bounds are 1e-11.
+// to 3.7e-8 and its filtered trial derivatives by up to 2.6e-6 of their peak
+// (fixture headers). The C++ result is held to the exact value at the limit
+// set by the conditioning of the problem (below) and to scipy at scipy's own
+// error; for small windows scipy is exact to ~1e-14 and both bounds are tight.
 namespace {
 
 struct Bounds {
@@ -32,7 +32,25 @@ struct Bounds {
   double scipy;
 };
 
-Bounds bounds_for(int window) { return window >= 101 ? Bounds{1e-11, 1e-6} : Bounds{1e-11, 1e-11}; }
+Bounds bounds_for(int window) { return window >= 101 ? Bounds{1e-13, 1e-7} : Bounds{1e-13, 1e-13}; }
+
+// Condition number of the filtered output w.r.t. rounding of the inputs and
+// of the products: ||r||_1 max|x| / max|y|, with r the largest weight row in
+// use, the edge fit evaluated at sample 0 (found by filtering unit impulses).
+// A position trace ~0.2 m whose jerk peaks at ~80 m/s^3 makes this ~7e4 for
+// the third derivative: no double-precision method can beat eps * kappa.
+double condition(const SavgolFilter& f, std::span<const double> x, std::span<const double> y_exact) {
+  const auto w = static_cast<std::size_t>(f.window());
+  std::vector<double> e(w, 0.0), r(w);
+  double row_l1 = 0.0;
+  for (std::size_t j = 0; j < w; ++j) {
+    e[j] = 1.0;
+    f.apply(e, r);
+    row_l1 += std::fabs(r[0]);
+    e[j] = 0.0;
+  }
+  return row_l1 * manip::dsp::test::peak(x) / manip::dsp::test::peak(y_exact);
+}
 
 }  // namespace
 
@@ -85,12 +103,12 @@ TEST_CASE("SavgolFilter: 3 s trial position, window 225 order 5 (30 Hz), deriv 0
     }
     REQUIRE((edge_left && edge_right));
     const double e_exact = norm_error(got, exact);
-    const double e_rel = rel_error(got, exact);
     const double e_scipy = norm_error(got, scipy);
+    const double eps_kappa = std::numeric_limits<double>::epsilon() * condition(f, x, exact);
     const std::string tag = "savgol trial W225 p5 d" + std::to_string(d) + kernel;
-    CHECK(observed(tag + " vs exact (normwise)", e_exact) <= 1e-11);
-    CHECK(observed(tag + " vs exact (per sample)", e_rel) <= 1e-9);
-    CHECK(observed(tag + " vs scipy (normwise)", e_scipy) <= 1e-6);
+    observed("savgol trial W225 p5 d" + std::to_string(d) + " eps * kappa", eps_kappa);
+    CHECK(observed(tag + " vs exact (normwise)", e_exact) <= 16.0 * eps_kappa);
+    CHECK(observed(tag + " vs scipy (normwise)", e_scipy) <= 1e-5);
   }
   manip::dsp::detail::savgol_allow_avx2(true);
 }
@@ -186,7 +204,7 @@ TEST_CASE("SavgolFilter: argument errors") {
   CHECK_THROWS_AS(f.apply(buf, buf), std::invalid_argument);
 }
 
-TEST_CASE("savgol cut-off: -3 dB points vs exact references and the platform facts; window for 30 Hz is 225") {
+TEST_CASE("savgol cut-off: -3 dB points vs exact references and the platform facts, window for 30 Hz is 225") {
   Numbers in("dsp/savgol_cutoff.txt");
   while (!in.done()) {
     const int w = in.next_int();

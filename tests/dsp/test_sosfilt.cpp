@@ -149,7 +149,7 @@ TEST_CASE("sosfiltfilt_padlen follows scipy's count of first-order sections") {
   CHECK(manip::dsp::sosfiltfilt_padlen(no_first_order) == 3 * (2 * 1 + 1 - 0));
 }
 
-TEST_CASE("sosfilt/sosfiltfilt: in place equals out of place; argument errors") {
+TEST_CASE("sosfilt/sosfiltfilt: in place equals out of place, argument errors") {
   const auto& x = trial_jerk();
   const auto hp = butter(5, 1.0, 4000.0, BandType::highpass);
   std::vector<double> y(x.size()), inplace = x;

@@ -73,7 +73,7 @@ TEST_CASE("welch: whole signal as one segment, zero padded to nfft = 16384") {
   check(welch(x, 4000.0, opt), ref, "welch trial nperseg=12000 nfft=16384");
 }
 
-TEST_CASE("welch: odd nfft with explicit overlap; nperseg clamped to a short input") {
+TEST_CASE("welch: odd nfft with explicit overlap, nperseg clamped to a short input") {
   {
     const auto ref = read_ref("dsp/welch_short_oddnfft.txt", 1000);
     WelchOptions opt;

@@ -56,5 +56,12 @@ TEST_CASE("manip_rt: exit codes of the executable", "[cli]") {
   CHECK(run("--trials 2 --lcm-url none --quiet --force --log " + log, &out) == 0);
   CHECK(std::filesystem::file_size(log) > 1000000u);
   CHECK(run("--trials 2 --lcm-url none --quiet --log " + log, &out) == 6);  // exists, no --force
+  // SIGINT during a paced run: stopped safely, log closed, exit 130
+  const std::string app = kApp;
+  const std::string cmd = "cd " + std::string(MANIP_SOURCE_DIR) + " && timeout --preserve-status -s INT 1 " + app +
+                          " --realtime --lcm-url none --quiet --force --log " + log + " >/dev/null 2>&1";
+  const int st = std::system(cmd.c_str());
+  CHECK((WIFEXITED(st) ? WEXITSTATUS(st) : -1) == 130);
+  CHECK(std::filesystem::file_size(log) > 100000u);
   std::filesystem::remove(log);
 }

@@ -42,6 +42,9 @@ bool lock_memory(std::string& err);
 // Returns false + err if SCHED_FIFO (or the affinity) could not be set.
 bool configure_rt_thread(const RtThreadOptions& o, std::string& err);
 void prefault_stack(std::size_t bytes);
+// Keeps the calling (non-real-time) thread off `cpu` (the loop's CPU), if
+// other CPUs exist. No-op for cpu < 0.
+void avoid_cpu(int cpu);
 
 // What the wrapper calls once per cycle. Return false to end the loop.
 class CycleBody {

@@ -15,11 +15,13 @@
 //
 // Accuracy note: scipy computes the coefficients with lstsq on the unscaled
 // Vandermonde matrix of -h..h, whose condition number is ~1e11 for window 225,
-// order 5; its coefficients are only good to ~4e-8 (normwise relative). We
-// solve the same least-squares problem in the scaled variable u = x / h with a
-// Householder QR, which agrees with the exact rational solution to ~1e-15.
-// Hence savgol results match scipy only to scipy's own error, and match the
-// exact result (see tests/fixtures/dsp/make_fixtures.py) to ~1e-13.
+// order 5; its coefficients are only good to ~4e-8 (normwise relative) and its
+// filtered derivatives of a reach trajectory to ~3e-6. We solve the same
+// least-squares problem in the scaled variable u = x / h with a Householder
+// QR: coefficients agree with the exact rational solution to ~5e-15, filtered
+// outputs to within a few eps * (condition number of the data), see
+// tests/dsp/test_savgol.cpp. Results therefore match scipy only to scipy's own
+// error.
 //
 // Odd windows only (the platform convention; scipy would accept even ones).
 #include <span>
@@ -87,8 +89,9 @@ class SavgolFilter {
 // paper's setting (225 has its -3 dB point at 30.09 Hz, 227 at 29.83 Hz); the
 // platform facts and the estimator expect 225 for (4 kHz, 30 Hz, order 5),
 // which is the nearest. The -3 dB point decreases monotonically with the window,
-// so this is a bracketing search, O(log window) coefficient designs.
-// Throws std::invalid_argument unless fs_hz > 0, 0 < fc_hz < fs_hz / 2, polyorder >= 0.
+// so this is a bracketing search, O(log window) coefficient designs (~1 ms).
+// Throws std::invalid_argument unless fs_hz > 0, 0 < fc_hz < fs_hz / 2,
+// polyorder >= 0, and the window needed stays below 2^18 samples.
 [[nodiscard]] int savgol_window_for_cutoff(double fs_hz, double fc_hz, int polyorder);
 
 namespace detail {

@@ -29,22 +29,27 @@ namespace manip::dsp {
 // zi_inout: empty -> zero initial state; otherwise 2 * sos.size() values in
 // sosfilt_zi's layout, overwritten with the final state (scipy's `zf`).
 // Throws std::invalid_argument for an empty cascade, a0 != 1 (scipy requires
-// normalised sections), or mismatched sizes. Never allocates.
+// normalised sections), or mismatched sizes. Never allocates. Performs scipy's
+// operations in scipy's order: given the same sections the output is
+// bit-identical to scipy's (tested).
 void sosfilt(std::span<const Sos> sos, std::span<const double> x, std::span<double> y,
              std::span<double> zi_inout = {});
 
 // scipy's default sosfiltfilt edge length:
 // 3 * (2 * n_sections + 1 - min(#sections with b2 == 0, #sections with a2 == 0)).
-// 18 for butter(5, ...) (three sections, one of them first order).
+// 18 for butter(5, ...) (three sections, one of them first order). Note the
+// min of two counts (scipy's code), not "sections with b2 == a2 == 0"; the two
+// agree for Butterworth designs.
 [[nodiscard]] int sosfiltfilt_padlen(std::span<const Sos> sos);
 
 // scipy.signal.sosfiltfilt(sos, x) with default padtype='odd', padlen=None.
 // Throws std::invalid_argument (message names both lengths) when
-// x.size() <= sosfiltfilt_padlen(sos), and for mismatched sizes. y may alias x.
+// x.size() <= sosfiltfilt_padlen(sos), for mismatched sizes and for x, y
+// partially overlapping (y == x, in place, is fine).
 // Scratch: the padded signal and the initial states live in a thread_local
 // buffer that only grows, so repeated calls with signals no longer than the
 // longest seen so far do not allocate; each thread has its own buffer, so the
-// function is thread-safe but keeps (len + 2 * padlen + 2 * n_sections) doubles
+// function is thread-safe but keeps (len + 2 * padlen + 4 * n_sections) doubles
 // per calling thread alive until the thread exits.
 void sosfiltfilt(std::span<const Sos> sos, std::span<const double> x, std::span<double> y);
 

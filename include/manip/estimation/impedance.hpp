@@ -62,6 +62,10 @@ struct OeSettings {
   int poly_order{3};
   int max_iterations{60};
   bool jackknife{true};     // SE from delete-one-trial refits (honest for correlated residuals)
+  // Prediction-error refinement: after a first fit, an AR(p) model of the
+  // residuals (Yule-Walker, pooled over trials and axes) whitens residuals in
+  // a second fit, so coloured process noise (motor noise) weighs less. 0 = off.
+  int prewhiten_order{0};
 };
 
 struct OeWindow {

@@ -1,0 +1,180 @@
+// estimate_impedance on a full manip_rt session (controller + simulated stages)
+// vs on a session of the same simulated person on the ideal admittance (same
+// schedule seed): the difference is what the rendering (stage friction, PD,
+// 2 kHz drive rate, 1 um encoders) costs the estimate.
+#include <catch2/catch.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <sstream>
+
+#include "manip/control/config.hpp"
+#include "manip/estimation/session_estimator.hpp"
+#include "manip/hardware/runner.hpp"
+#include "manip/hardware/sim_backend.hpp"
+#include "manip/logging/session_stream.hpp"
+#include "manip/sim/session_runner.hpp"
+
+using namespace manip::control;
+namespace hw = manip::hardware;
+using manip::Mat2;
+
+namespace {
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kSanitized = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool kSanitized = true;
+#else
+constexpr bool kSanitized = false;
+#endif
+#else
+constexpr bool kSanitized = false;
+#endif
+
+std::string tmp(const char* n) {
+  return (std::filesystem::temp_directory_path() / (std::string("manip_est_rt_") + n + "_" + std::to_string(::getpid()) + ".lcm"))
+      .string();
+}
+
+const manip::estimation::Summary* session_summary(const manip::estimation::Report& r, const std::string& method) {
+  for (const auto& s : r.summaries)
+    if (s.method == method && s.group == "session") return &s;
+  return nullptr;
+}
+
+std::string fmt(const Mat2& m) {
+  char b[160];
+  std::snprintf(b, sizeof b, "[[%.2f, %.2f], [%.2f, %.2f]]", m(0, 0), m(0, 1), m(1, 0), m(1, 1));
+  return b;
+}
+}  // namespace
+
+namespace {
+namespace est = manip::estimation;
+
+est::Report estimate_rendered(const RtConfig& cfg, const std::string& path) {
+  hw::SimBackend sim(cfg, hw::make_sim_human(cfg));
+  hw::RunOptions opt;
+  opt.log_path = path;
+  opt.overwrite_log = true;
+  opt.lcm_url = "none";
+  opt.quiet = true;
+  std::ostringstream out;
+  const auto rep = hw::run_session(cfg, sim, opt, out);
+  REQUIRE(rep.exit_code == 0);
+  REQUIRE(rep.trials.perturbed_completed == cfg.perturbed_count());
+  est::EstimatorSettings es;
+  es.methods = {est::default_method()};
+  auto r = est::estimate_log(path, es);
+  std::filesystem::remove(path);
+  return r;
+}
+
+// The same person (parameters, reach design, schedule seed) on the ideal admittance.
+est::Report estimate_ideal(const RtConfig& cfg, const std::string& path) {
+  manip::sim::SessionDesign d;
+  d.sample_rate_hz = cfg.loop.sample_rate_hz;
+  d.substeps = cfg.sim.substeps;
+  d.n_movements = cfg.protocol.movements;
+  d.angles_deg = cfg.perturbation.angles_deg;
+  d.reps_per_angle = cfg.perturbation.repeats_per_angle;
+  d.write_twins = false;
+  d.start_shoulder_m = cfg.protocol.start_shoulder_m;
+  d.goal_shoulder_m = cfg.protocol.goal_shoulder_m;
+  d.trigger_x2_shoulder_m = cfg.perturbation.trigger_x2_shoulder_m;
+  d.perturbation = {cfg.perturbation.duration_s, cfg.perturbation.amplitude_n};
+  d.reach_duration_s = cfg.sim.participant.reach_duration_s;
+  d.reach_duration_jitter_s = cfg.sim.participant.reach_duration_jitter_s;
+  d.lateral_bow_std_m = cfg.sim.participant.lateral_bow_std_m;
+  d.encoder_resolution_m = cfg.sim.encoder_resolution_m;
+  d.force_noise_n = cfg.sim.force_noise_n;
+  d.admittance.m_adm_kg = cfg.admittance.m_adm_kg.asDiagonal();
+  d.admittance.d_adm_nspm = cfg.admittance.d_adm_nspm.asDiagonal();
+  d.admittance.m_handle_kg = cfg.handle_mass_kg.asDiagonal();
+  d.frame = cfg.frames;
+  d.seed = cfg.protocol.seed;
+  d.source = "manip_sim/linear (test: manip_rt comparison)";
+  auto human = hw::make_sim_human(cfg);
+  {
+    manip::logging::LogWritingHandler w(path);
+    manip::sim::run_session(d, *human, w);
+    w.close();
+  }
+  est::EstimatorSettings es;
+  es.methods = {est::default_method()};
+  auto r = est::estimate_log(path, es);
+  std::filesystem::remove(path);
+  return r;
+}
+}  // namespace
+
+TEST_CASE("estimate_impedance on a manip_rt sim session matches the same person on the ideal admittance",
+          "[estimator][session][full]") {
+  if (kSanitized) {
+    WARN("skipped under sanitizers (full session + estimation; covered by the Release run)");
+    return;
+  }
+  const RtConfig cfg = load_rt_config(std::string(MANIP_SOURCE_DIR) + "/config/rt.yaml");
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto ra = estimate_rendered(cfg, tmp("rendered"));
+  const auto rb = estimate_ideal(cfg, tmp("ideal"));
+  const auto* sa = session_summary(ra, est::default_method());
+  const auto* sb = session_summary(rb, est::default_method());
+  REQUIRE(sa);
+  REQUIRE(sb);
+  CHECK(ra.n_perturbed == 24);
+  const Mat2 d_true = cfg.sim.human.d_nspm, k_true = cfg.sim.human.k_npm;
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::ostringstream msg;
+  msg << "method " << est::default_method() << " (" << wall << " s):\n"
+      << "  truth     D " << fmt(d_true) << "  K " << fmt(k_true) << "\n"
+      << "  ideal     D " << fmt(sb->d_nspm) << "  K " << fmt(sb->k_npm) << "\n"
+      << "  manip_rt  D " << fmt(sa->d_nspm) << "  K " << fmt(sa->k_npm) << "\n"
+      << "  |manip_rt - ideal|: D " << (sa->d_nspm - sb->d_nspm).norm() << " N s/m (Frobenius; truth "
+      << d_true.norm() << "), K " << (sa->k_npm - sb->k_npm).norm() << " N/m (truth " << k_true.norm() << ")";
+  WARN(msg.str());
+  // Documented tolerance (docs/controller.md, "Rendering and the estimate"):
+  // the rendering moves the pooled default-method estimate by less than 20 %
+  // of the truth's Frobenius norm, for K and for D (measured: 17 % and 14 %).
+  CHECK((sb->k_npm - k_true).norm() < 0.05 * k_true.norm());  // the ideal admittance recovers the truth
+  CHECK((sa->k_npm - sb->k_npm).norm() < 0.20 * k_true.norm());
+  CHECK((sa->d_nspm - sb->d_nspm).norm() < 0.20 * d_true.norm());
+}
+
+// Which part of the rendering moves the estimate: one change at a time.
+// Hidden (about a minute): ./test_hardware "[rendering_study]"
+TEST_CASE("rendering study: estimate vs ideal admittance, one rendering imperfection at a time",
+          "[.][rendering_study]") {
+  const std::string path = std::string(MANIP_SOURCE_DIR) + "/config/rt.yaml";
+  const RtConfig base = load_rt_config(path);
+  const auto ideal = estimate_ideal(base, tmp("ideal"));
+  const auto* si = session_summary(ideal, est::default_method());
+  REQUIRE(si);
+  struct Variant {
+    const char* name;
+    ConfigOverrides ov;
+  };
+  const Variant variants[] = {
+      {"default", {}},
+      {"no stage friction", {{"sim.viscous_nspm", "[0, 0]"}, {"sim.coulomb_n", "[0, 0]"}}},
+      {"drive rate 4 kHz", {{"loop.drive_rate_hz", "4000"}}},
+      {"no encoder quantisation", {{"sim.encoder_resolution_m", "0"}}},
+      {"PD bandwidth x2", {{"pd.kp_npm", "[1.2e6, 4.0e5]"}, {"pd.kd_nspm", "[5200, 1760]"}}},
+      {"all of the above",
+       {{"sim.viscous_nspm", "[0, 0]"}, {"sim.coulomb_n", "[0, 0]"}, {"loop.drive_rate_hz", "4000"},
+        {"sim.encoder_resolution_m", "0"}, {"pd.kp_npm", "[1.2e6, 4.0e5]"}, {"pd.kd_nspm", "[5200, 1760]"}}},
+  };
+  std::ostringstream msg;
+  msg << "ideal admittance: D " << fmt(si->d_nspm) << " K " << fmt(si->k_npm) << "\n";
+  for (const auto& v : variants) {
+    const RtConfig cfg = load_rt_config(path, v.ov);
+    const auto r = estimate_rendered(cfg, tmp("variant"));
+    const auto* sv = session_summary(r, est::default_method());
+    REQUIRE(sv);
+    msg << v.name << ": D " << fmt(sv->d_nspm) << " K " << fmt(sv->k_npm) << "  |dD| " << (sv->d_nspm - si->d_nspm).norm()
+        << "  |dK| " << (sv->k_npm - si->k_npm).norm() << "\n";
+  }
+  WARN(msg.str());
+}
