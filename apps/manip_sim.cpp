@@ -32,6 +32,10 @@ int main(int argc, char** argv) {
   app.add_option("--human", human, "linear (linear endpoint impedance) | neuromech (two-link six-muscle arm, §4.1)");
   app.add_option("--person", person, "linear human: table1 (paper Table 1) | stiff");
   app.add_option("--arm-config", arm_config, "neuromech parameters YAML (default config/arm_model.yaml)");
+  std::string feedback = "config";
+  app.add_option("--feedback", feedback,
+                 "neuromech: config (as in the YAML) | intrinsic (all feedback pathways off: the ground-truth case) | "
+                 "short-latency (only the short-latency reflex on)");
   app.add_option("--noise", noise, "none | realistic (docs/accuracy-study.md)");
   app.add_option("--movements", movements, "number of movements (default 100, paper §5.2)");
   app.add_option("--reps", reps, "perturbed repetitions per angle (default 3: 24 perturbed trials)");
@@ -62,6 +66,16 @@ int main(int argc, char** argv) {
     } else if (human == "neuromech") {
       if (arm_config.empty()) arm_config = std::string(MANIP_SOURCE_DIR) + "/config/arm_model.yaml";
       auto np = load_neuromech_params(arm_config);
+      if (feedback == "intrinsic") {
+        np.disable_feedback();
+      } else if (feedback == "short-latency") {
+        np.disable_feedback();
+        np.pathway(Pathway::kShortLatency).enabled = true;
+      } else if (feedback != "config") {
+        throw std::invalid_argument("--feedback must be config, intrinsic or short-latency");
+      }
+      // The log's session message must describe the simulated arm (M_BSP a priori).
+      d.anthropometrics = np.anthropometrics;
       d.substeps = static_cast<int>(std::lround(1.0 / (np.step_s * d.sample_rate_hz)));
       h = std::make_unique<NeuromechanicalArm>(np);
       d.source = "manip_sim/neuromech";

@@ -84,7 +84,7 @@ Bus::Bus(const RtConfig& cfg, Links links)
     : cfg_(cfg), links_(links), gate_(*links.to_loop, CommandLimits::from_config(cfg)) {}
 
 Bus::~Bus() {
-  if (lcm_ && sub_) lcm_->unsubscribe(sub_);
+  if (lcm_ && sub_) lcm_unsubscribe(lcm_->getUnderlyingLCM(), sub_);
 }
 
 bool Bus::open(const std::string& url, std::string& err) {
@@ -96,8 +96,8 @@ bool Bus::open(const std::string& url, std::string& err) {
           "or pass --lcm-url none to run without the live bus)";
     return false;
   }
-  sub_ = lcm_->subscribe(channels::kCommand, &Bus::on_command, this);
-  if (sub_) sub_->setQueueCapacity(cfg_.bus.subscription_queue_capacity);
+  sub_ = lcm_subscribe(lcm_->getUnderlyingLCM(), channels::kCommand, &Bus::c_on_command, this);
+  if (sub_) lcm_subscription_set_queue_capacity(sub_, cfg_.bus.subscription_queue_capacity);
   next_health_ns_ = mono_ns();
   return true;
 }
@@ -111,9 +111,13 @@ void Bus::publish(const char* channel, const Msg& m) {
 void Bus::publish_session(const manip::session_t& s) { publish(channels::kSession, s); }
 void Bus::publish_fault(const manip::fault_t& f) { publish(channels::kFault, f); }
 
-void Bus::on_command(const lcm::ReceiveBuffer* rbuf, const std::string& /*channel*/) {
+void Bus::c_on_command(const _lcm_recv_buf_t* rbuf, const char* /*channel*/, void* self) {
+  static_cast<Bus*>(self)->on_command(rbuf->data, static_cast<int>(rbuf->data_size));
+}
+
+void Bus::on_command(const void* data, int size) {
   const std::int8_t mode = links_.status ? links_.status->mode.load(std::memory_order_relaxed) : 0;
-  auto rejected = gate_.submit(rbuf->data, static_cast<int>(rbuf->data_size), wall_clock_us(), mode);
+  auto rejected = gate_.submit(data, size, wall_clock_us(), mode);
   if (rejected) {
     publish(channels::kCommandStatus, *rejected);
     if (links_.to_logger) links_.to_logger->enqueue(AuxRecord(*rejected));

@@ -62,7 +62,7 @@ TEST_CASE("paced loop: cycles never skipped, overruns counted, late cycles flagg
     CHECK(body.overran_flags_ == t.overruns);  // the body is told about each one
   }
   SECTION("re-anchor counts the skipped periods") {
-    SlowSometimes body(200, 50, std::chrono::microseconds(2000));  // 2 ms: 8 periods lost each time
+    SlowSometimes body(210, 50, std::chrono::microseconds(2000));  // 2 ms: 8 periods lost each time
     TimingStats st;
     run_paced(body, PacedOptions{250000, OverrunPolicy::kReanchor, 4}, st);
     const auto t = st.snapshot();
@@ -71,7 +71,7 @@ TEST_CASE("paced loop: cycles never skipped, overruns counted, late cycles flagg
     CHECK(body.gapless_);
   }
   SECTION("catch up too far behind re-anchors and counts") {
-    SlowSometimes body(100, 50, std::chrono::microseconds(5000));  // 20 periods > max_catch_up 4
+    SlowSometimes body(110, 50, std::chrono::microseconds(5000));  // 20 periods > max_catch_up 4
     TimingStats st;
     run_paced(body, PacedOptions{250000, OverrunPolicy::kCatchUp, 4}, st);
     CHECK(st.snapshot().skipped_periods >= 2 * 15);

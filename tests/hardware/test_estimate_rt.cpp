@@ -4,6 +4,8 @@
 // 2 kHz drive rate, 1 um encoders) costs the estimate.
 #include <catch2/catch.hpp>
 
+#include "sanitized.hpp"
+
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -21,17 +23,6 @@ namespace hw = manip::hardware;
 using manip::Mat2;
 
 namespace {
-#if defined(__SANITIZE_ADDRESS__)
-constexpr bool kSanitized = true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-constexpr bool kSanitized = true;
-#else
-constexpr bool kSanitized = false;
-#endif
-#else
-constexpr bool kSanitized = false;
-#endif
 
 std::string tmp(const char* n) {
   return (std::filesystem::temp_directory_path() / (std::string("manip_est_rt_") + n + "_" + std::to_string(::getpid()) + ".lcm"))

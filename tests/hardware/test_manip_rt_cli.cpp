@@ -53,9 +53,9 @@ TEST_CASE("manip_rt: exit codes of the executable", "[cli]") {
   std::filesystem::remove(bad);
 
   const std::string log = (std::filesystem::temp_directory_path() / "manip_rt_cli.lcm").string();
-  CHECK(run("--trials 2 --lcm-url none --quiet --force --log " + log, &out) == 0);
+  CHECK(run("--duration 2 --lcm-url none --quiet --force --log " + log, &out) == 0);
   CHECK(std::filesystem::file_size(log) > 1000000u);
-  CHECK(run("--trials 2 --lcm-url none --quiet --log " + log, &out) == 6);  // exists, no --force
+  CHECK(run("--duration 2 --lcm-url none --quiet --log " + log, &out) == 6);  // exists, no --force
   // SIGINT during a paced run: stopped safely, log closed, exit 130
   const std::string app = kApp;
   const std::string cmd = "cd " + std::string(MANIP_SOURCE_DIR) + " && timeout --preserve-status -s INT 1 " + app +

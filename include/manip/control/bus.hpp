@@ -32,9 +32,9 @@
 
 namespace lcm {
 class LCM;
-class ReceiveBuffer;
-class Subscription;
 }  // namespace lcm
+struct _lcm_recv_buf_t;
+struct _lcm_subscription_t;
 
 namespace manip::control {
 
@@ -97,7 +97,8 @@ class Bus {
   [[nodiscard]] std::int64_t command_rejects() const { return gate_.rejected(); }
 
  private:
-  void on_command(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
+  static void c_on_command(const _lcm_recv_buf_t* rbuf, const char* channel, void* self);
+  void on_command(const void* data, int size);
   void drain_loop();
   template <class Msg>
   void publish(const char* channel, const Msg& m);
@@ -105,7 +106,7 @@ class Bus {
   RtConfig cfg_;
   Links links_;
   std::unique_ptr<lcm::LCM> lcm_;
-  lcm::Subscription* sub_{nullptr};
+  _lcm_subscription_t* sub_{nullptr};  // C API: no C++ subscription wrapper
   CommandGate gate_;
   std::int64_t next_health_ns_{0};
   std::int64_t published_states_{0};
