@@ -16,7 +16,7 @@
 
 int main(int argc, char** argv) {
   CLI::App app{"bench_rt: paced manip_rt loop on the sim backend; JSON timing summary on stdout"};
-  std::string config = "config/rt.yaml", log = "", lcm_url = "none";
+  std::string config = "config/rt.yaml", log = "", lcm_url = "none", histogram;
   double seconds = 60.0;
   int priority = 80, cpu = -1;
   app.add_option("--config", config)->capture_default_str();
@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   app.add_option("--cpu", cpu, "pin the loop to this CPU (-1: no affinity)")->capture_default_str();
   app.add_option("--log", log, "log file (default: a temporary file, deleted afterwards)");
   app.add_option("--lcm-url", lcm_url, "live bus URL ('none': no bus)")->capture_default_str();
+  app.add_option("--histogram", histogram, "write the wake-up latency histogram (cyclictest -h format: 'us count')");
   CLI11_PARSE(app, argc, argv);
 
   const std::string path =
@@ -43,6 +44,18 @@ int main(int argc, char** argv) {
     opt.quiet = true;
     const auto rep = manip::hardware::run_session(cfg, sim, opt, std::cerr);
     if (log.empty()) std::filesystem::remove(path);
+    if (!histogram.empty()) {
+      std::FILE* f = std::fopen(histogram.c_str(), "w");
+      if (!f) {
+        std::cerr << "bench_rt: cannot write " << histogram << "\n";
+        return 1;
+      }
+      const auto& h = rep.latency_histogram;
+      for (std::size_t i = 0; i + 1 < h.size(); ++i)
+        if (h[i]) std::fprintf(f, "%06zu %06lld\n", i, static_cast<long long>(h[i]));
+      std::fprintf(f, "# Histogram Overflows: %lld\n", static_cast<long long>(h.empty() ? 0 : h.back()));
+      std::fclose(f);
+    }
     const auto& t = rep.timing;
     std::printf(
         "{\"cycles\": %lld, \"wall_s\": %.3f, \"latency_p50_us\": %.0f, \"latency_p99_us\": %.0f, "

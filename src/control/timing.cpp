@@ -65,6 +65,12 @@ TimingSnapshot TimingStats::snapshot() const {
   return s;
 }
 
+std::vector<std::int64_t> TimingStats::latency_histogram() const {
+  std::vector<std::int64_t> h(lat_.size());
+  for (std::size_t i = 0; i < lat_.size(); ++i) h[i] = lat_[i].load(std::memory_order_relaxed);
+  return h;
+}
+
 std::string TimingSnapshot::summary() const {
   char buf[512];
   std::snprintf(buf, sizeof buf,

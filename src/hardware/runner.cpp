@@ -229,6 +229,7 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
   const auto& st = ctl.status();
   rep.stop_reason = static_cast<StopReason>(st.stop_reason.load());
   rep.timing = timing.snapshot();
+  rep.latency_histogram = timing.latency_histogram();
   rep.log = logger.stats();
   rep.log_drops = st.log_drops.load();
   rep.bus_drops = st.bus_drops.load();

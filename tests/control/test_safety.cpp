@@ -87,7 +87,7 @@ TEST_CASE("mode machine: every operation from every mode", "[safety]") {
   }
 }
 
-TEST_CASE("mode machine: faults latch until reset; reset returns to PAUSED once a session started", "[safety]") {
+TEST_CASE("mode machine: faults latch until reset, which returns to PAUSED once a session started", "[safety]") {
   SafetyStateMachine sm = in_mode(Mode::kRunning);
   CHECK(sm.raise(fault::kVelocity | fault::kWorkspace) == (fault::kVelocity | fault::kWorkspace));
   CHECK(sm.raise(fault::kVelocity) == 0u);  // already latched: nothing new
@@ -307,7 +307,7 @@ TEST_CASE("controller: perturbation beyond its limit faults in the onset window"
   CHECK(ctl.mode() == Mode::kFault);
 }
 
-TEST_CASE("controller: LCM e-stop -> safe law in the same cycle; reset only when clear", "[safety][controller][commands]") {
+TEST_CASE("controller: LCM e-stop -> safe law in the same cycle, reset only when clear", "[safety][controller][commands]") {
   RtConfig cfg;
   Rig rig(cfg);
   for (int i = 0; i < 2001; ++i) rig.step();

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace manip::control {
 
@@ -36,6 +37,8 @@ class TimingStats {
   void add_skipped(std::int64_t n) { skipped_.store(skipped_.load(std::memory_order_relaxed) + n, std::memory_order_relaxed); }
   // Any thread.
   [[nodiscard]] TimingSnapshot snapshot() const;
+  // Wake-up latency histogram: counts per 1 us bin, the last entry = over range.
+  [[nodiscard]] std::vector<std::int64_t> latency_histogram() const;
   void reset();
 
  private:

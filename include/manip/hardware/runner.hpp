@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <ostream>
 #include <string>
+#include <vector>
 
 #include "manip/control/config.hpp"
 #include "manip/control/controller.hpp"
@@ -59,6 +60,7 @@ struct RunReport {
   std::int64_t cycles{0};
   double wall_s{0.0};
   control::TimingSnapshot timing{};
+  std::vector<std::int64_t> latency_histogram;  // 1 us bins, last = over range
   control::LoggerStats log{};
   std::int64_t log_drops{0}, bus_drops{0};
   std::int64_t commands_accepted{0}, commands_rejected{0};
