@@ -7,13 +7,11 @@
 
 #include "manip/common/channels.hpp"
 #include "manip/control/messages.hpp"
+#include "manip/control/rt_thread.hpp"
 
 namespace manip::control {
 namespace {
-std::int64_t mono_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t mono_ns() { return monotonic_ns(); }
 }  // namespace
 
 CommandLimits CommandLimits::from_config(const RtConfig& cfg) {

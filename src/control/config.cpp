@@ -379,7 +379,8 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
     {
       auto h = s.sub("human");
       auto& u = m.human;
-      u.model = h.choice("model", {"linear"});
+      u.model = h.choice("model", {"linear", "neuromech"});
+      if (h.has("arm_config")) u.arm_config = h.string("arm_config");
       u.m_kg = h.mat2_spd("m_kg");
       u.d_nspm = h.mat2("d_nspm");
       u.k_npm = h.mat2("k_npm");

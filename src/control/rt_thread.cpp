@@ -14,13 +14,15 @@
 #include <thread>
 
 namespace manip::control {
-namespace {
-
-std::int64_t now_ns() {
+std::int64_t monotonic_ns() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
 }
+
+namespace {
+
+std::int64_t now_ns() { return monotonic_ns(); }
 
 timespec to_timespec(std::int64_t ns) {
   timespec ts{};

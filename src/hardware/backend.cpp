@@ -7,7 +7,12 @@ namespace manip::hardware {
 BackendResult make_backend(const std::string& name, const control::RtConfig& cfg) {
   BackendResult r;
   if (name == "sim") {
-    r.backend = std::make_unique<SimBackend>(cfg, make_sim_human(cfg));
+    try {
+      r.backend = std::make_unique<SimBackend>(cfg, make_sim_human(cfg));
+    } catch (const std::exception& e) {  // e.g. the neuromech arm's YAML
+      r.exit_code = exit_code::kConfig;
+      r.error = std::string("sim backend: ") + e.what();
+    }
     return r;
   }
   if (name == "can") {

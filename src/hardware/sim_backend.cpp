@@ -5,11 +5,24 @@
 #include <cmath>
 
 #include "manip/sim/linear_human.hpp"
+#include "manip/sim/neuromech_arm.hpp"
 
 namespace manip::hardware {
 
 std::unique_ptr<sim::HumanModel> make_sim_human(const control::RtConfig& cfg) {
   const auto& h = cfg.sim.human;
+  if (h.model == "neuromech") {
+    // Throws (file: key: reason) on a bad YAML; advance() rejects a substep
+    // that is not a multiple of the arm's integration step at the first cycle,
+    // so check it here, at start-up.
+    const auto np = sim::load_neuromech_params(h.arm_config);
+    const double dt = 1.0 / (cfg.loop.sample_rate_hz * cfg.sim.substeps);
+    const double ratio = dt / np.step_s;
+    if (std::abs(ratio - std::round(ratio)) > 1e-6 * ratio || std::round(ratio) < 1.0)
+      throw std::runtime_error(h.arm_config + ": integration.step_s " + std::to_string(np.step_s) +
+                               " s does not divide the sim substep " + std::to_string(dt) + " s");
+    return std::make_unique<sim::NeuromechanicalArm>(np);
+  }
   sim::LinearHumanParams p;
   p.m_kg = h.m_kg;
   p.d_nspm = h.d_nspm;

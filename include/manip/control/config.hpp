@@ -121,7 +121,8 @@ struct BusConfig {
 };
 
 struct SimHumanConfig {
-  std::string model{"linear"};
+  std::string model{"linear"};                        // linear | neuromech
+  std::string arm_config{"config/arm_model.yaml"};    // neuromech parameters (relative to the working directory)
   Mat2 m_kg{(Mat2() << 1.515460, -0.824986, -0.824986, 1.409055).finished()};
   Mat2 d_nspm{(Mat2() << 10.98, -7.94, -8.54, 6.75).finished()};
   Mat2 k_npm{(Mat2() << 110.52, -106.05, -106.05, 313.75).finished()};

@@ -20,6 +20,9 @@
 
 namespace manip::control {
 
+// CLOCK_MONOTONIC now [ns]: the one clock of the loop, the logger and the bus.
+std::int64_t monotonic_ns();
+
 struct RtCapabilities {
   bool preempt_rt{false};
   std::string kernel_release;  // uname -r

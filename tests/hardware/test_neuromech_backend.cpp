@@ -1,0 +1,56 @@
+// manip_rt's sim backend with the neuromechanical arm as the simulated person
+// (simulation issue: the same model runs inside the 4 kHz loop).
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+#include <sstream>
+
+#include "manip/control/config.hpp"
+#include "manip/estimation/session_estimator.hpp"
+#include "manip/hardware/backend.hpp"
+#include "manip/hardware/runner.hpp"
+#include "sanitized.hpp"
+
+using manip::control::load_rt_config;
+namespace hw = manip::hardware;
+
+namespace {
+std::string src(const std::string& rel) { return std::string(MANIP_SOURCE_DIR) + "/" + rel; }
+}  // namespace
+
+TEST_CASE("sim backend: the neuromechanical arm runs a session inside the loop and the log estimates", "[session]") {
+  const auto base = load_rt_config(src("config/rt.yaml"));
+  auto ov = manip::control::trials_overrides(base, kSanitized ? 1 : 8);
+  ov.push_back({"sim.human.model", "neuromech"});
+  ov.push_back({"sim.human.arm_config", src("config/arm_model.yaml")});
+  const auto cfg = load_rt_config(src("config/rt.yaml"), ov);
+  auto made = hw::make_backend("sim", cfg);
+  REQUIRE(made.backend);
+  const auto path = (std::filesystem::temp_directory_path() / "manip_rt_neuromech.lcm").string();
+  hw::RunOptions opt;
+  opt.log_path = path;
+  opt.overwrite_log = true;
+  opt.lcm_url = "none";
+  opt.quiet = true;
+  std::ostringstream out;
+  const auto rep = hw::run_session(cfg, *made.backend, opt, out);
+  INFO(out.str() << rep.summary());
+  REQUIRE(rep.exit_code == hw::exit_code::kOk);
+  CHECK(rep.trials.perturbed_completed == cfg.perturbed_count());
+  manip::estimation::EstimatorSettings s;
+  s.methods = {"paper-pooled"};
+  const auto r = manip::estimation::estimate_log(path, s);
+  CHECK(r.n_used == cfg.perturbed_count());
+  std::filesystem::remove(path);
+}
+
+TEST_CASE("sim backend: a bad neuromech parameter file is a configuration error naming the file", "[session]") {
+  const auto base = load_rt_config(src("config/rt.yaml"));
+  const auto cfg = load_rt_config(src("config/rt.yaml"), {{"sim.human.model", "neuromech"},
+                                                          {"sim.human.arm_config", "/nonexistent/arm.yaml"}});
+  auto made = hw::make_backend("sim", cfg);
+  CHECK_FALSE(made.backend);
+  CHECK(made.exit_code == hw::exit_code::kConfig);
+  CHECK(made.error.find("/nonexistent/arm.yaml") != std::string::npos);
+  (void)base;
+}
