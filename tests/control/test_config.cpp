@@ -2,7 +2,6 @@
 #include <catch2/catch.hpp>
 
 #include <fstream>
-#include <regex>
 #include <sstream>
 
 #include "manip/control/config.hpp"
@@ -63,7 +62,12 @@ TEST_CASE("config errors name the file, the line, the key and the reason", "[con
     const std::string e = error_of(replace(base, "  mass_kg: [0.25, 0.25]", "  mass_kg: [0.25, 0.25]\n  mass_kgg: 1"));
     CHECK(e.find("cfg.yaml:") == 0);
     CHECK(e.find("handle.mass_kgg: unknown key") != std::string::npos);
-    CHECK(std::regex_search(e, std::regex("^cfg\\.yaml:[0-9]+: ")));
+    // "cfg.yaml:<line>: " (no <regex>: GCC 12 + sanitizers warn inside it)
+    const auto colon = e.find(':', 9);
+    REQUIRE(colon != std::string::npos);
+    CHECK(colon > 9);
+    CHECK(e.substr(9, colon - 9).find_first_not_of("0123456789") == std::string::npos);
+    CHECK(e.compare(colon, 2, ": ") == 0);
   }
   SECTION("unknown top-level section") {
     CHECK(error_of(base + "\nextra:\n  a: 1\n").find("extra: unknown key") != std::string::npos);
