@@ -1,6 +1,8 @@
 // The manip_rt executable's exit codes (skipped when the app is not built).
 #include <catch2/catch.hpp>
 
+#include <unistd.h>
+
 #include <sys/wait.h>
 
 #include <cstdio>
@@ -13,7 +15,7 @@ namespace {
 const std::string kApp = std::string(MANIP_BINARY_DIR) + "/apps/manip_rt";
 
 int run(const std::string& args, std::string* output = nullptr) {
-  const std::string out = (std::filesystem::temp_directory_path() / "manip_rt_cli_out.txt").string();
+  const std::string out = (std::filesystem::temp_directory_path() / ("manip_rt_cli_out_" + std::to_string(::getpid()) + ".txt")).string();
   const std::string cmd = "cd " + std::string(MANIP_SOURCE_DIR) + " && " + kApp + " " + args + " >" + out + " 2>&1";
   const int st = std::system(cmd.c_str());
   if (output) {
@@ -39,7 +41,7 @@ TEST_CASE("manip_rt: exit codes of the executable", "[cli]") {
   CHECK(out.find("not implemented") != std::string::npos);
   CHECK(run("--no-such-flag", &out) == 2);
 
-  const std::string bad = (std::filesystem::temp_directory_path() / "manip_rt_bad.yaml").string();
+  const std::string bad = (std::filesystem::temp_directory_path() / ("manip_rt_bad_" + std::to_string(::getpid()) + ".yaml")).string();
   {
     std::ifstream in(std::string(MANIP_SOURCE_DIR) + "/config/rt.yaml");
     std::ostringstream os;
@@ -52,7 +54,7 @@ TEST_CASE("manip_rt: exit codes of the executable", "[cli]") {
   CHECK(out.find("unexpected_section: unknown key") != std::string::npos);
   std::filesystem::remove(bad);
 
-  const std::string log = (std::filesystem::temp_directory_path() / "manip_rt_cli.lcm").string();
+  const std::string log = (std::filesystem::temp_directory_path() / ("manip_rt_cli_" + std::to_string(::getpid()) + ".lcm")).string();
   CHECK(run("--duration 2 --lcm-url none --quiet --force --log " + log, &out) == 0);
   CHECK(std::filesystem::file_size(log) > 1000000u);
   CHECK(run("--duration 2 --lcm-url none --quiet --log " + log, &out) == 6);  // exists, no --force

@@ -2,6 +2,8 @@
 // (simulation issue: the same model runs inside the 4 kHz loop).
 #include <catch2/catch.hpp>
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <sstream>
 
@@ -26,7 +28,7 @@ TEST_CASE("sim backend: the neuromechanical arm runs a session inside the loop a
   const auto cfg = load_rt_config(src("config/rt.yaml"), ov);
   auto made = hw::make_backend("sim", cfg);
   REQUIRE(made.backend);
-  const auto path = (std::filesystem::temp_directory_path() / "manip_rt_neuromech.lcm").string();
+  const auto path = (std::filesystem::temp_directory_path() / ("manip_rt_neuromech_" + std::to_string(::getpid()) + ".lcm")).string();
   hw::RunOptions opt;
   opt.log_path = path;
   opt.overwrite_log = true;

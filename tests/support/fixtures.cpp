@@ -1,5 +1,7 @@
 #include "fixtures.hpp"
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -36,7 +38,8 @@ std::vector<double> read_numbers(const std::string& relative) {
 }
 
 std::string temp_dir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / ("manip_test_" + name);
+  // Per process: ctest -j runs test cases of one executable in parallel processes.
+  const auto dir = std::filesystem::temp_directory_path() / ("manip_test_" + name + "_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir.string();

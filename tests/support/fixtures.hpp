@@ -9,7 +9,7 @@ namespace manip::testutil {
 std::string fixture_path(const std::string& relative);
 // All numbers of a fixture file, in order. Throws std::runtime_error naming the file.
 std::vector<double> read_numbers(const std::string& relative);
-// A fresh empty directory under the build tree for one test's outputs.
+// A fresh empty directory (per test process, under the system temp dir) for one test's outputs.
 std::string temp_dir(const std::string& name);
 
 }  // namespace manip::testutil
