@@ -31,7 +31,7 @@ int main(int argc, char** argv) {
   std::string k_model, force_source;
   bool estimate_m = false, no_jackknife = false, quiet = false;
   app.add_option("logs", logs, "LCM log files (one session each)")->required()->check(CLI::ExistingFile);
-  app.add_option("--method", method, "paper | paper-pooled | oe | oe-trial | all (default oe, see docs/estimator.md)");
+  app.add_option("--method", method, "pem | paper | paper-pooled | oe | oe-trial | all (default pem, see docs/estimator.md)");
   app.add_option("--cutoff", cutoff, "high-pass cut-off in Hz, or 'auto' from the jerk PSDs (default 1, paper §4.3)");
   app.add_option("--cutoff-threshold-db", cutoff_thr, "perturbed/unperturbed PSD ratio for --cutoff auto (default 3 dB)");
   app.add_option("--t-est", t_est, "estimation window after onset [s] (default 0.15)");
@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
       }
     }
     if (cutoff_thr > 0) s.cutoff_auto_threshold_db = cutoff_thr;
-    if (t_est > 0) s.pipeline.t_est_s = s.oe.t_est_s = t_est;
+    if (t_est > 0) s.pipeline.t_est_s = s.oe.t_est_s = s.pem.t_est_s = t_est;
     if (sg_window > 0) {
       if (sg_window % 2 == 0) throw std::invalid_argument("--sg-window must be odd");
       s.pipeline.sg_window = sg_window;

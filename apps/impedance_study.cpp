@@ -56,6 +56,10 @@ int main(int argc, char** argv) {
   app.add_option("--oe-pre", oe_pre, "output-error data before onset [s] (default: estimator default)");
   app.add_option("--methods", methods, "comma list of methods or 'all'");
   int prewhiten = -1;
+  std::string pem_structure;
+  double pem_pre = -1;
+  app.add_option("--pem-structure", pem_structure, "prediction error: box-jenkins | armax (default: estimator default)");
+  app.add_option("--pem-pre", pem_pre, "prediction error: data before onset [s] (default: estimator default)");
   app.add_option("--oe-prewhiten", prewhiten, "output-error prewhitening AR order (default: estimator default)");
   CLI11_PARSE(app, argc, argv);
   auto split = [](const std::string& s) {
@@ -86,6 +90,10 @@ int main(int argc, char** argv) {
         if (oe_poly >= 0) es.oe.poly_order = oe_poly;
         if (oe_pre >= 0) es.oe.t_pre_s = oe_pre;
         if (prewhiten >= 0) es.oe.prewhiten_order = prewhiten;
+        if (pem_pre >= 0) es.pem.t_pre_s = pem_pre;
+        if (pem_structure == "armax") es.pem.structure = estimation::PemStructure::armax;
+        else if (!pem_structure.empty() && pem_structure != "box-jenkins")
+          throw std::invalid_argument("--pem-structure: must be box-jenkins or armax");
         estimation::SessionEstimator se(es);
         estimation::TrialAssembler asmb(
             [&](const estimation::SessionInfo& info, estimation::TrialData&& t) { se.add_trial(info, std::move(t)); });

@@ -8,6 +8,7 @@
 // median, min and max of each are printed, one line each:
 //   RESULT <name> median_s=<> min_s=<> max_s=<> reps=<>
 // For proc-*, copying the in-memory trials for each repetition is not timed.
+// Each also gets a <name>-cpu line: process CPU time (all threads) of the same runs.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -16,6 +17,7 @@
 #include <vector>
 
 #include <sys/resource.h>
+#include <time.h>
 
 #include <CLI/CLI.hpp>
 
@@ -29,6 +31,14 @@ using Clock = std::chrono::steady_clock;
 namespace est = manip::estimation;
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// CPU time of the whole process (all threads): less sensitive than wall time to
+// other users of a shared machine (not to their cache and memory traffic).
+double process_cpu_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
 
 class TouchHandler final : public manip::logging::SessionHandler {
  public:
@@ -95,17 +105,21 @@ int main(int argc, char** argv) {
   for (int r = 0; r < reps; ++r) {
     if (want("floor")) {
       TouchHandler h;
+      const double c0 = process_cpu_s();
       const auto t0 = Clock::now();
       manip::logging::read_log(log, h);
       t["floor"].push_back(seconds_since(t0));
+      t["floor-cpu"].push_back(process_cpu_s() - c0);
       g_sink = g_sink + h.sum;
       if (r == 0) std::fprintf(stderr, "floor: %ld states, %ld twin states\n", h.n, h.n_truth);
     }
     for (const auto& [name, s] : {std::pair{std::string("e2e-paper"), paper}, std::pair{std::string("e2e-oe"), oe}}) {
       if (!want(name)) continue;
+      const double c0 = process_cpu_s();
       const auto t0 = Clock::now();
       const auto rep = est::estimate_log(log, s);
       t[name].push_back(seconds_since(t0));
+      t[name + "-cpu"].push_back(process_cpu_s() - c0);
       g_sink = g_sink + rep.summaries.size();
       if (r == 0) std::fprintf(stderr, "%s: %d trials, %d perturbed, %d used\n", name.c_str(), rep.n_trials, rep.n_perturbed, rep.n_used);
     }
@@ -114,15 +128,18 @@ int main(int argc, char** argv) {
       auto copy = trials;  // not timed
       auto iss = issues;
       auto warn = warnings;
+      const double c0 = process_cpu_s();
       const auto t0 = Clock::now();
       est::SessionEstimator e(s);
       for (auto& tr : copy) e.add_trial(info, std::move(tr));
       const auto rep = e.finish(std::move(iss), std::move(warn));
       t[name].push_back(seconds_since(t0));
+      t[name + "-cpu"].push_back(process_cpu_s() - c0);
       g_sink = g_sink + rep.summaries.size();
     }
   }
-  for (const auto& name : {"floor", "e2e-paper", "e2e-oe", "proc-paper", "proc-oe"}) {
+  for (const auto& name : {"floor", "e2e-paper", "e2e-oe", "proc-paper", "proc-oe", "floor-cpu", "e2e-paper-cpu",
+                            "e2e-oe-cpu", "proc-paper-cpu", "proc-oe-cpu"}) {
     const auto it = t.find(name);
     if (it == t.end()) continue;
     const auto& v = it->second;

@@ -10,9 +10,12 @@
 // Each run simulates `trials` paired reaches (unperturbed twin + 15 N perturbed,
 // 4.0 s each, the paper's feedback configuration with noise) and reports the median
 // over runs of the simulated/wall ratio, for:
-//   A: plant at 4 kHz, model step 1/4 kHz (one integration step per plant step)
-//   B: plant at 4 kHz, model step 1/16 kHz (config default; 4 internal sub-steps)
-//   C: plant at 16 kHz, model step 1/16 kHz (the session runner's 4 kHz x 4 sub-steps)
+//   A: plant at 4 kHz, model step 1/4 kHz, midpoint plant step: manip_sim's session
+//      runner (integration.session_step_s)
+//   B: plant at 16 kHz, model step 1/16 kHz, explicit plant step: manip_rt's sim
+//      backend as configured (4 kHz loop x 4 substeps, integration.step_s)
+//   C: plant at 16 kHz sub-stepping a 1/4 kHz model, explicit: the sim backend if
+//      its start-up check allowed a substep that is a fraction of the model step
 #include <CLI/CLI.hpp>
 #include <Eigen/LU>
 #include <algorithm>
@@ -44,7 +47,7 @@ struct Result {
   double checksum{0};  // keeps the work observable
 };
 
-Result run(const NeuromechParams& p, double plant_hz, int trials) {
+Result run(const NeuromechParams& p, double plant_hz, bool midpoint, int trials) {
   NeuromechanicalArm arm(p);  // allocation happens here, outside the timed loop
   const Mat2 m_load = Mat2::Identity() * 5.3, d_adm = Mat2::Identity() * 15.0;
   const PerturbationProfile prof;
@@ -65,8 +68,12 @@ Result run(const NeuromechParams& p, double plant_hz, int trials) {
                                   : Vec2::Zero();
         Mat2 m_x;
         Vec2 h;
-        arm.endpoint_dynamics(m_x, h);
-        const Vec2 xdd = (m_x + m_load).inverse() * (h - d_adm * arm.hand_velocity_mps() + u);
+        if (midpoint)
+          arm.endpoint_dynamics_for_step(dt, m_x, h);
+        else
+          arm.endpoint_dynamics(m_x, h);
+        const Mat2 m = m_x + m_load + (midpoint ? 0.5 * dt : 0.0) * d_adm;
+        const Vec2 xdd = m.inverse() * (h - d_adm * arm.hand_velocity_mps() + u);
         arm.advance(dt, xdd);
       }
       r.checksum += arm.hand_position_m().sum();
@@ -94,10 +101,11 @@ int main(int argc, char** argv) {
   struct Case {
     const char* name;
     double step_s, plant_hz;
+    bool midpoint;
   };
-  const Case cases[] = {{"A plant 4 kHz, step 1/4 kHz ", 1.0 / 4000.0, 4000.0},
-                        {"B plant 4 kHz, step 1/16 kHz", 1.0 / 16000.0, 4000.0},
-                        {"C plant 16 kHz, step 1/16 kHz", 1.0 / 16000.0, 16000.0}};
+  const Case cases[] = {{"A plant 4 kHz, step 1/4 kHz, midpoint  ", base.session_step_s, 4000.0, true},
+                        {"B plant 16 kHz, step 1/16 kHz, explicit", base.step_s, 16000.0, false},
+                        {"C plant 16 kHz, step 1/4 kHz, explicit ", 1.0 / 4000.0, 16000.0, false}};
   std::printf("config %s; %d runs x %d paired trials x 2 x 4.0 s; feedback as configured, noise on\n", config.c_str(),
               runs, trials);
   for (const Case& c : cases) {
@@ -106,7 +114,7 @@ int main(int argc, char** argv) {
     std::vector<double> wall, cpu;
     double checksum = 0.0;
     for (int i = 0; i < runs; ++i) {
-      const Result r = run(p, c.plant_hz, trials);
+      const Result r = run(p, c.plant_hz, c.midpoint, trials);
       wall.push_back(r.sim_s / r.wall_s);
       cpu.push_back(r.sim_s / r.cpu_s);
       checksum += r.checksum;

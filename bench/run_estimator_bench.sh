@@ -44,6 +44,8 @@ if [[ ! -s $LOG ]]; then
 fi
 ls -l "$LOG" >&2
 
+# The machines are shared: record how busy this one was around the run.
+echo "load before: $(cut -d' ' -f1-3 /proc/loadavg)" | tee "$OUT/load.txt" >&2
 echo "== C++ ($REPS reps, interleaved)" >&2
 "$BUILD/bench/bench_estimator" "$LOG" --reps "$REPS" | tee "$OUT/cpp.txt"
 
@@ -59,6 +61,7 @@ for m in paper oe; do
   done
 done
 grep '^RSS' "$OUT/rss.txt" >&2
+echo "load after: $(cut -d' ' -f1-3 /proc/loadavg)" | tee -a "$OUT/load.txt" >&2
 
 # Table.
 "$PY" - "$OUT/cpp.txt" "$OUT/py.txt" "$OUT/rss.txt" <<'EOF'
@@ -83,6 +86,11 @@ rows = [
     ("py-decode", "Python lcm.EventLog read + decode + trial arrays"),
     ("py-proc-full", "SciPy chain, paper method (SG d=1,2,3 as briefed)"),
     ("py-proc-minimal", "SciPy chain, paper method (SG d=3 only, as C++)"),
+    ("floor-cpu", "(CPU time) floor"),
+    ("e2e-paper-cpu", "(CPU time, both threads) e2e {paper}"),
+    ("proc-paper-cpu", "(CPU time) C++ processing {paper}"),
+    ("py-proc-full-cpu", "(CPU time) SciPy chain, full"),
+    ("py-proc-minimal-cpu", "(CPU time) SciPy chain, minimal"),
 ]
 print()
 print("| measurement | median [s] | min [s] | max [s] | reps |")
@@ -105,6 +113,9 @@ ratio("e2e-oe", "floor", "end-to-end {oe} / floor", "<= 1.5")
 ratio("py-proc-full", "proc-paper", "SciPy processing (full) / C++ processing {paper}", ">= 10")
 ratio("py-proc-minimal", "proc-paper", "SciPy processing (minimal) / C++ processing {paper}", ">= 10")
 ratio("py-decode", "floor", "Python read+decode / C++ floor", "info")
+ratio("e2e-paper-cpu", "floor-cpu", "(CPU time) end-to-end {paper} / floor", "info: what a fully loaded machine would show")
+ratio("py-proc-full-cpu", "proc-paper-cpu", "(CPU time) SciPy processing (full) / C++ processing {paper}", "info")
+ratio("py-proc-minimal-cpu", "proc-paper-cpu", "(CPU time) SciPy processing (minimal) / C++ processing {paper}", "info")
 if rss:
     worst = max(x[0] for v in rss.values() for x in v)
     print(f"- peak RSS of estimate_impedance: {worst:.0f} MB max over runs (target < 256 MB)")

@@ -22,6 +22,7 @@ constant 2x2 matrix is used (a 2x2 evaluation per trial, negligible either way).
 Prints machine-readable lines:
   RESULT py-decode  median_s=... min_s=... max_s=... reps=...
   RESULT py-proc-<chain> median_s=... min_s=... max_s=... reps=...
+  RESULT py-proc-<chain>-cpu ...   (process CPU time of the same runs)
 """
 import argparse
 import os
@@ -180,14 +181,19 @@ def main():
     print(summary("py-decode", td))
     chains = ["full", "minimal"] if args.chain == "both" else [args.chain]
     times = {c: [] for c in chains}
+    cpu = {c: [] for c in chains}
     for _ in range(args.reps):
         for c in chains:  # interleaved
+            c0 = time.process_time()  # all threads (BLAS may use several), like the C++ -cpu lines
             t0 = time.perf_counter()
             res, _psd = process(info, trials, chain=c)
             times[c].append(time.perf_counter() - t0)
+            cpu[c].append(time.process_time() - c0)
     print(f"py: {len(res)} per-trial fits", file=sys.stderr)
     for c in chains:
         print(summary(f"py-proc-{c}", times[c]))
+    for c in chains:
+        print(summary(f"py-proc-{c}-cpu", cpu[c]))
 
 
 if __name__ == "__main__":

@@ -26,8 +26,19 @@ std::string fmt(double v, int prec = 2) {
   return o.str();
 }
 
+nlohmann::json disturbance_json(const DisturbanceModel& d) {
+  return {{"structure", d.box_jenkins ? "box-jenkins" : "armax"},
+          {"motor_noise_std_n", d.motor_noise_n},
+          {"motor_noise_tau_s", d.motor_tau_s},
+          {"drive_psd_n2ps3", d.drive_psd},
+          {"measurement_noise_std_m", d.meas_std_m},
+          {"D_v_Nspm", mat(d.d_nspm)},
+          {"K_v_Npm", mat(d.k_npm)},
+          {"neg_log_likelihood", d.neg_log_likelihood}};
+}
+
 nlohmann::json estimate_json(const ImpedanceEstimate& e) {
-  return {{"M_kg", mat(e.m_kg)},
+  nlohmann::json j = {{"M_kg", mat(e.m_kg)},
           {"M_estimated", e.m_estimated},
           {"D_Nspm", mat(e.d_nspm)},
           {"K_Npm", mat(e.k_npm)},
@@ -45,14 +56,18 @@ nlohmann::json estimate_json(const ImpedanceEstimate& e) {
           {"iterations", e.iterations},
           {"identifiable", e.identifiable},
           {"flag", e.flag}};
+  if (e.disturbance) j["disturbance"] = disturbance_json(*e.disturbance);
+  return j;
 }
 
 nlohmann::json summary_json(const Summary& s) {
-  return {{"method", s.method}, {"group", s.group},       {"kind", s.kind},           {"n_trials", s.n_trials},
+  nlohmann::json j = {{"method", s.method}, {"group", s.group},       {"kind", s.kind},           {"n_trials", s.n_trials},
           {"D_Nspm", mat(s.d_nspm)}, {"K_Npm", mat(s.k_npm)}, {"D_spread", mat(s.d_spread)},
           {"K_spread", mat(s.k_spread)}, {"D_ci95_lo", mat(s.d_lo)}, {"D_ci95_hi", mat(s.d_hi)},
           {"K_ci95_lo", mat(s.k_lo)}, {"K_ci95_hi", mat(s.k_hi)}, {"M_kg", mat(s.m_kg)},
           {"identifiable", s.identifiable}, {"flag", s.flag}, {"n_flagged_trials", s.n_flagged_trials}};
+  if (s.disturbance) j["disturbance"] = disturbance_json(*s.disturbance);
+  return j;
 }
 
 // ---- minimal SVG line plots (no plotting dependency in the C++ tool) ------
@@ -145,7 +160,12 @@ nlohmann::json settings_to_json(const EstimatorSettings& s) {
           {"oe_poly_order", s.oe.poly_order},
           {"oe_max_iterations", s.oe.max_iterations},
           {"oe_jackknife", s.oe.jackknife},
-          {"oe_prewhiten_order", s.oe.prewhiten_order}};
+          {"oe_prewhiten_order", s.oe.prewhiten_order},
+          {"pem_t_pre_s", s.pem.t_pre_s},
+          {"pem_t_est_s", s.pem.t_est_s},
+          {"pem_structure", s.pem.structure == PemStructure::box_jenkins ? "box-jenkins" : "armax"},
+          {"pem_se", s.pem.se == PemSe::sandwich ? "sandwich" : (s.pem.se == PemSe::fisher ? "fisher" : "jackknife")},
+          {"pem_max_iterations", s.pem.max_iterations}};
 }
 
 nlohmann::json to_json(const Report& r, const std::string& log_name) {
@@ -225,6 +245,10 @@ std::string format_text(const Report& r, const std::string& log_name) {
     if (pooled)
       o << "    95% CI: D11 [" << fmt(s.d_lo(0, 0)) << ", " << fmt(s.d_hi(0, 0)) << "], K11 [" << fmt(s.k_lo(0, 0))
         << ", " << fmt(s.k_hi(0, 0)) << "], K22 [" << fmt(s.k_lo(1, 1)) << ", " << fmt(s.k_hi(1, 1)) << "]\n";
+    if (s.disturbance)
+      o << "    person's own motion (" << (s.disturbance->box_jenkins ? "box-jenkins" : "armax") << "): motor noise " << fmt(s.disturbance->motor_noise_n, 3)
+        << " N std, tau " << fmt(s.disturbance->motor_tau_s * 1000, 1) << " ms; position noise "
+        << fmt(s.disturbance->meas_std_m * 1e6, 2) << " um std\n";
   }
   if (r.truth.available) {
     o << "\n  ground truth (" << r.truth.model << ", mean over " << r.truth.n_trials << " trials): D = ["
@@ -386,7 +410,7 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
       else { s.cutoff_auto = false; D(s.pipeline.hp_cutoff_hz); }
     } else if (key == "cutoff_auto_threshold_db") D(s.cutoff_auto_threshold_db);
     else if (key == "psd_nfft") D(s.psd_nfft);
-    else if (key == "t_est_s") { D(s.pipeline.t_est_s); s.oe.t_est_s = s.pipeline.t_est_s; }
+    else if (key == "t_est_s") { D(s.pipeline.t_est_s); s.oe.t_est_s = s.pem.t_est_s = s.pipeline.t_est_s; }
     else if (key == "k_model") {
       const auto m = get_as<std::string>(v, path, key);
       if (m == "symmetric") s.ls.k_model = StiffnessModel::symmetric;
@@ -403,7 +427,20 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
     else if (key == "oe_max_iterations") D(s.oe.max_iterations);
     else if (key == "oe_jackknife") D(s.oe.jackknife);
     else if (key == "oe_prewhiten_order") D(s.oe.prewhiten_order);
-    else throw std::runtime_error(path + ": " + key + ": unknown key");
+    else if (key == "pem_t_pre_s") D(s.pem.t_pre_s);
+    else if (key == "pem_max_iterations") D(s.pem.max_iterations);
+    else if (key == "pem_structure") {
+      const auto m = get_as<std::string>(v, path, key);
+      if (m == "box-jenkins") s.pem.structure = PemStructure::box_jenkins;
+      else if (m == "armax") s.pem.structure = PemStructure::armax;
+      else throw std::runtime_error(path + ": pem_structure: must be 'box-jenkins' or 'armax', not '" + m + "'");
+    } else if (key == "pem_se") {
+      const auto m = get_as<std::string>(v, path, key);
+      if (m == "sandwich") s.pem.se = PemSe::sandwich;
+      else if (m == "fisher") s.pem.se = PemSe::fisher;
+      else if (m == "jackknife") s.pem.se = PemSe::jackknife;
+      else throw std::runtime_error(path + ": pem_se: must be 'sandwich', 'fisher' or 'jackknife', not '" + m + "'");
+    } else throw std::runtime_error(path + ": " + key + ": unknown key");
   }
   auto bad = [&](bool cond, const char* key, const char* why) {
     if (cond) throw std::runtime_error(path + ": " + key + ": " + why);
@@ -419,6 +456,8 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
   bad(s.oe.poly_order < 0 || s.oe.poly_order > 8, "oe_poly_order", "must be 0..8");
   bad(s.oe.max_iterations < 1, "oe_max_iterations", "must be >= 1");
   bad(s.oe.prewhiten_order < 0 || s.oe.prewhiten_order > 20, "oe_prewhiten_order", "must be 0..20");
+  bad(!(s.pem.t_pre_s >= 0.01 && s.pem.t_pre_s <= 0.5), "pem_t_pre_s", "must be in [0.01, 0.5] s");
+  bad(s.pem.max_iterations < 1, "pem_max_iterations", "must be >= 1");
   return s;
 }
 

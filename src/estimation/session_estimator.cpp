@@ -2,9 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <mutex>
 #include <numbers>
+#include <optional>
 #include <set>
 #include <stdexcept>
+#include <thread>
 
 #include "manip/dsp/dsp.hpp"
 
@@ -92,19 +98,20 @@ Summary summarise_pooled(const std::string& method, const std::string& group, co
   s.k_hi = e.k_npm + e.ci_factor * e.k_se;
   s.identifiable = e.identifiable;
   s.flag = e.flag;
+  s.disturbance = e.disturbance;
   return s;
 }
 
 }  // namespace
 
-std::vector<std::string> all_methods() { return {"paper", "paper-pooled", "oe", "oe-trial"}; }
-std::string default_method() { return "oe"; }
+std::vector<std::string> all_methods() { return {"pem", "paper", "paper-pooled", "oe", "oe-trial"}; }
+std::string default_method() { return "pem"; }
 
 SessionEstimator::SessionEstimator(EstimatorSettings s) : s_(std::move(s)) {
   for (const auto& m : s_.methods) {
     const auto all = all_methods();
     if (std::find(all.begin(), all.end(), m) == all.end())
-      throw std::invalid_argument("unknown method '" + m + "' (known: paper, paper-pooled, oe, oe-trial, all)");
+      throw std::invalid_argument("unknown method '" + m + "' (known: pem, paper, paper-pooled, oe, oe-trial, all)");
   }
 }
 
@@ -118,23 +125,71 @@ void SessionEstimator::add_trial(const SessionInfo& info, TrialData&& t) {
   if (s_.pipeline.sg_window <= 0) s_.pipeline.sg_window = sg_window_for(s_.pipeline, info.fs_hz);
   // PSD of the principal-axis jerk with one segment spanning the trial
   // (zero-padded to a common nfft so all trials share one frequency grid).
-  const auto j = principal_axis_jerk(info, t, s_.pipeline);
-  if (!j.empty()) {
+  // The same filter and values as principal_axis_jerk(), with the filter
+  // designed once per session and the buffers reused.
+  const int win = s_.pipeline.sg_window;
+  if (t.size() >= static_cast<std::size_t>(win)) {
+    if (!jerk_filter_) jerk_filter_ = std::make_unique<dsp::SavgolFilter>(win, s_.pipeline.sg_order, 3, 1.0 / info.fs_hz);
+    const std::size_t n = t.size();
+    jerk_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) jerk_[i] = t.x_m[i](1);
+    jerk_out_.resize(n);
+    jerk_filter_->apply(jerk_, jerk_out_);
+    const std::vector<double>& j = jerk_out_;
     dsp::WelchOptions wo;
     wo.nfft = s_.psd_nfft;
-    wo.nperseg = static_cast<int>(std::min<std::size_t>(j.size(), static_cast<std::size_t>(s_.psd_nfft)));
+    wo.nperseg = static_cast<int>(std::min<std::size_t>(n, static_cast<std::size_t>(s_.psd_nfft)));
     wo.noverlap = wo.nperseg / 2;
-    const auto psd = dsp::welch(j, info.fs_hz, wo);
+    dsp::welch(j, info.fs_hz, wo, psd_);
     if (f_.empty()) {
-      f_ = psd.f_hz;
+      f_ = psd_.f_hz;
       psd_unpert_.assign(f_.size(), 0.0);
       psd_pert_.assign(f_.size(), 0.0);
     }
     auto& acc = t.perturbed ? psd_pert_ : psd_unpert_;
-    for (std::size_t i = 0; i < acc.size() && i < psd.pxx.size(); ++i) acc[i] += psd.pxx[i];
+    for (std::size_t i = 0; i < acc.size() && i < psd_.pxx.size(); ++i) acc[i] += psd_.pxx[i];
     (t.perturbed ? n_pert_psd_ : n_unpert_) += 1;
   }
-  if (t.perturbed) perturbed_.push_back(std::move(t));
+  if (!t.perturbed) return;
+  ++n_perturbed_;
+  if (s_.cutoff_auto) {
+    perturbed_.push_back(std::move(t));  // the cut-off is known only after the last PSD
+  } else {
+    // The x2 jerk of this trial is still in jerk_out_ if the PSD was computed.
+    const bool have_jerk = t.size() >= static_cast<std::size_t>(win) && jerk_out_.size() == t.size();
+    prepared_.push_back(prepare(t, s_.pipeline, have_jerk ? std::span<const double>(jerk_out_) : std::span<const double>{}));
+  }
+}
+
+SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& t, const PipelineSettings& pipe,
+                                                     std::span<const double> jerk_x2) const {
+  Prepared p;
+  p.trial = t.trial;
+  try {
+    const TwoLinkArm arm(info_.anthropometrics);
+    const Vec2 x_on = t.x_m.at(static_cast<std::size_t>(t.onset_index));
+    const auto m_bsp = arm.endpoint_inertia_at(x_on);
+    if (!m_bsp)
+      throw std::invalid_argument("trial " + std::to_string(t.trial) + ": onset position (" + std::to_string(x_on.x()) +
+                                  ", " + std::to_string(x_on.y()) + ") m out of the arm's reach");
+    p.vw = isolate_variational(info_, t, pipe, jerk_x2);
+    p.ow = make_oe_window(info_, t, *m_bsp, s_.oe);
+    OeSettings pem_window = s_.oe;
+    pem_window.t_pre_s = s_.pem.t_pre_s;
+    pem_window.t_est_s = s_.pem.t_est_s;
+    p.pw = make_oe_window(info_, t, *m_bsp, pem_window);
+    p.m_bsp = *m_bsp;
+    if (t.has_truth) {
+      p.has_truth = true;
+      p.truth_d = t.truth_d_nspm;
+      p.truth_k = t.truth_k_npm;
+      p.truth_m = t.truth_m_kg;
+      p.truth_model = t.truth_model;
+    }
+  } catch (const std::exception& e) {
+    p.error = e.what();
+  }
+  return p;
 }
 
 Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std::string> warnings) {
@@ -144,7 +199,7 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
   rep.issues = std::move(issues);
   rep.warnings = std::move(warnings);
   rep.n_trials = n_trials_;
-  rep.n_perturbed = static_cast<int>(perturbed_.size());
+  rep.n_perturbed = n_perturbed_;
   if (!have_info_) return rep;
   rep.sg_window = sg_window_for(s_.pipeline, info_.fs_hz);
 
@@ -185,38 +240,37 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
   }
   rep.cutoff_used_hz = pipe.hp_cutoff_hz;
 
-  // Per-trial preparation: M_BSP at onset (eq. 16), isolated Δ signals, OE windows.
-  const TwoLinkArm arm(info_.anthropometrics);
+  // Per-trial preparation: M_BSP at onset (eq. 16), isolated Δ signals, OE
+  // windows; done in add_trial already unless the cut-off was chosen above.
+  if (s_.cutoff_auto) {
+    for (const auto& t : perturbed_) prepared_.push_back(prepare(t, pipe, {}));
+    perturbed_.clear();
+  }
   std::vector<VariationalWindow> vw;
   std::vector<Mat2> mb;
-  std::vector<OeWindow> ow;
+  std::vector<OeWindow> ow, pw;
   std::vector<int> vw_trial;
   TruthSummary& truth = rep.truth;
-  for (const auto& t : perturbed_) {
-    try {
-      const Vec2 x_on = t.x_m.at(static_cast<std::size_t>(t.onset_index));
-      const auto m_bsp = arm.endpoint_inertia_at(x_on);
-      if (!m_bsp)
-        throw std::invalid_argument("trial " + std::to_string(t.trial) + ": onset position (" + std::to_string(x_on.x()) +
-                                    ", " + std::to_string(x_on.y()) + ") m out of the arm's reach");
-      auto w = isolate_variational(info_, t, pipe);
-      auto o = make_oe_window(info_, t, *m_bsp, s_.oe);
-      vw.push_back(std::move(w));
-      mb.push_back(*m_bsp);
-      ow.push_back(std::move(o));
-      vw_trial.push_back(t.trial);
-      if (t.has_truth) {
-        truth.available = true;
-        ++truth.n_trials;
-        truth.d_nspm += t.truth_d_nspm;
-        truth.k_npm += t.truth_k_npm;
-        truth.m_kg += t.truth_m_kg;
-        truth.model = t.truth_model;
-      }
-    } catch (const std::exception& e) {
-      rep.issues.push_back({t.trial, e.what()});
+  for (auto& p : prepared_) {
+    if (p.error) {
+      rep.issues.push_back({p.trial, *p.error});
+      continue;
+    }
+    vw.push_back(std::move(p.vw));
+    mb.push_back(p.m_bsp);
+    ow.push_back(std::move(p.ow));
+    pw.push_back(std::move(p.pw));
+    vw_trial.push_back(p.trial);
+    if (p.has_truth) {
+      truth.available = true;
+      ++truth.n_trials;
+      truth.d_nspm += p.truth_d;
+      truth.k_npm += p.truth_k;
+      truth.m_kg += p.truth_m;
+      truth.model = p.truth_model;
     }
   }
+  prepared_.clear();
   if (truth.n_trials > 0) {
     truth.d_nspm /= truth.n_trials;
     truth.k_npm /= truth.n_trials;
@@ -268,6 +322,8 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
       }
       rep.trials.insert(rep.trials.end(), per.begin(), per.end());
     } else {
+      std::optional<DisturbanceModel> session_disturbance;
+      bool session_only = true;
       auto pooled = [&](const std::vector<std::size_t>& idx, bool jack) {
         if (method == "paper-pooled") {
           std::vector<VariationalWindow> w;
@@ -279,6 +335,15 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
           return fit_equation_error(w, m, s_.ls);
         }
         std::vector<OeWindow> w;
+        if (method == "pem") {
+          for (auto i : idx) w.push_back(pw[i]);
+          PemSettings ps = s_.pem;
+          if (!session_only && session_disturbance) {  // per angle: D, K only
+            ps.hold_disturbance = true;
+            ps.fixed_disturbance = *session_disturbance;
+          }
+          return fit_prediction_error(w, ps);
+        }
         for (auto i : idx) w.push_back(ow[i]);
         OeSettings o = s_.oe;
         o.jackknife = jack && s_.oe.jackknife;
@@ -287,10 +352,13 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
       std::vector<std::size_t> idx(vw.size());
       for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
       try {
-        rep.summaries.push_back(summarise_pooled(method, "session", pooled(idx, true)));
+        const auto e = pooled(idx, true);
+        session_disturbance = e.disturbance;
+        rep.summaries.push_back(summarise_pooled(method, "session", e));
       } catch (const std::exception& e) {
         rep.warnings.push_back(method + ": session fit failed: " + e.what());
       }
+      session_only = false;
       for (double a : angles) {
         std::vector<std::size_t> sub;
         for (std::size_t i = 0; i < vw.size(); ++i)
@@ -308,11 +376,92 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
   return rep;
 }
 
+namespace {
+
+// Single-producer single-consumer queue of trials, bounded so that a reader
+// faster than the worker waits instead of buffering the session.
+class TrialQueue {
+ public:
+  explicit TrialQueue(std::size_t capacity) : cap_(capacity) {}
+  // False if the consumer has stopped (the item is dropped).
+  bool push(TrialData&& t) {
+    std::unique_lock lk(m_);
+    not_full_.wait(lk, [&] { return q_.size() < cap_ || stopped_; });
+    if (stopped_) return false;
+    q_.push_back(std::move(t));
+    not_empty_.notify_one();
+    return true;
+  }
+  // Empty optional once closed and drained.
+  std::optional<TrialData> pop() {
+    std::unique_lock lk(m_);
+    not_empty_.wait(lk, [&] { return !q_.empty() || closed_; });
+    if (q_.empty()) return std::nullopt;
+    TrialData t = std::move(q_.front());
+    q_.pop_front();
+    not_full_.notify_one();
+    return t;
+  }
+  void close() {  // producer: no more items
+    std::lock_guard lk(m_);
+    closed_ = true;
+    not_empty_.notify_all();
+  }
+  void stop() {  // consumer: failed, take no more items
+    std::lock_guard lk(m_);
+    stopped_ = true;
+    q_.clear();
+    not_full_.notify_all();
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable not_full_, not_empty_;
+  std::deque<TrialData> q_;
+  std::size_t cap_;
+  bool closed_{false}, stopped_{false};
+};
+
+}  // namespace
+
 Report estimate_log(const std::string& path, const EstimatorSettings& s) {
   SessionEstimator est(s);
-  TrialAssembler asmb([&](const SessionInfo& info, TrialData&& t) { est.add_trial(info, std::move(t)); });
-  logging::read_log(path, asmb);
-  asmb.finish();
+  // A trial is ~0.5-2 MB; four in flight keep both threads busy.
+  TrialQueue queue(4);
+  // Written by the reader once, before the first push (the session message
+  // comes first and is never replaced); the queue's mutex orders it before
+  // the worker's first read.
+  SessionInfo info;
+  bool have_info = false;
+  std::exception_ptr worker_error;
+  std::thread worker([&] {
+    try {
+      while (auto t = queue.pop()) est.add_trial(info, std::move(*t));
+    } catch (...) {
+      worker_error = std::current_exception();
+      queue.stop();
+    }
+  });
+  TrialAssembler asmb([&](const SessionInfo& i, TrialData&& t) {
+    if (!have_info) {
+      info = i;
+      have_info = true;
+    }
+    queue.push(std::move(t));  // false only after a worker error, rethrown below
+  });
+  // Unperturbed trials only feed the PSD of x2: skip copying their other signals.
+  asmb.set_keep_unperturbed_signals(false);
+  try {
+    logging::read_log(path, asmb);
+    asmb.finish();
+  } catch (...) {
+    queue.close();
+    worker.join();
+    throw;
+  }
+  queue.close();
+  worker.join();
+  if (worker_error) std::rethrow_exception(worker_error);
   if (!asmb.has_session()) throw std::runtime_error(path + ": no session message (MANIP_SESSION) in the log");
   return est.finish(asmb.issues(), asmb.warnings());
 }

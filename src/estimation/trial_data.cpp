@@ -45,6 +45,7 @@ void TrialAssembler::on_session(const manip::session_t& msg) {
     return;
   }
   info_ = session_info_from(msg);
+  rot_ = info_.frame.rotation();
   has_session_ = true;
   if (!(info_.fs_hz > 0.0)) throw std::runtime_error("session message: sample_rate_hz must be positive");
   if (const auto why = info_.anthropometrics.invalid_reason())
@@ -72,27 +73,34 @@ void TrialAssembler::on_state(const manip::state_t& s) {
     drop("non-finite sample at cycle " + std::to_string(s.cycle));
     return;
   }
-  const auto& fr = info_.frame;
   const auto idx = s.cycle - cur_.start_cycle;
   if (idx != static_cast<std::int64_t>(cur_.x_m.size())) {
     drop("state cycle " + std::to_string(s.cycle) + " out of sequence");
     return;
   }
-  cur_.x_m.push_back(fr.point_to_shoulder(v2(s.x_workspace_m)));
-  cur_.f_sensor_n.push_back(fr.vector_to_shoulder(v2(s.f_sensor_workspace_n)));
-  cur_.u_pert_n.push_back(fr.vector_to_shoulder(v2(s.u_pert_workspace_n)));
-  cur_.x_ref_m.push_back(fr.point_to_shoulder(v2(s.x_ref_workspace_m)));
-  cur_.xd_ref_m.push_back(fr.vector_to_shoulder(v2(s.xd_ref_workspace_mps)));
-  cur_.xdd_ref_m.push_back(fr.vector_to_shoulder(v2(s.xdd_ref_workspace_mps2)));
+  // Same arithmetic as WorkspaceToShoulder::point_to_shoulder / vector_to_shoulder.
+  const Vec2& o = info_.frame.origin_in_shoulder_m;
+  cur_.x_m.push_back(rot_ * v2(s.x_workspace_m) + o);
+  if (!keep_all_) return;
+  cur_.f_sensor_n.push_back(rot_ * v2(s.f_sensor_workspace_n));
+  cur_.u_pert_n.push_back(rot_ * v2(s.u_pert_workspace_n));
+  cur_.x_ref_m.push_back(rot_ * v2(s.x_ref_workspace_m) + o);
+  cur_.xd_ref_m.push_back(rot_ * v2(s.xd_ref_workspace_mps));
+  cur_.xdd_ref_m.push_back(rot_ * v2(s.xdd_ref_workspace_mps2));
 }
 
 void TrialAssembler::on_truth_state(const manip::state_t& s) {
   if (!in_trial_ || s.trial != cur_.trial || !has_session_) return;
   const auto idx = s.cycle - cur_.start_cycle;
   if (idx != static_cast<std::int64_t>(cur_.x_twin_m.size())) return;  // misaligned twin: ignore it
-  cur_.x_twin_m.push_back(info_.frame.point_to_shoulder(v2(s.x_ref_workspace_m)));
-  cur_.xd_twin_m.push_back(info_.frame.vector_to_shoulder(v2(s.xd_ref_workspace_mps)));
-  cur_.xdd_twin_m.push_back(info_.frame.vector_to_shoulder(v2(s.xdd_ref_workspace_mps2)));
+  if (cur_.x_twin_m.empty()) {
+    cur_.x_twin_m.reserve(cur_.x_m.capacity());
+    cur_.xd_twin_m.reserve(cur_.x_m.capacity());
+    cur_.xdd_twin_m.reserve(cur_.x_m.capacity());
+  }
+  cur_.x_twin_m.push_back(rot_ * v2(s.x_ref_workspace_m) + info_.frame.origin_in_shoulder_m);
+  cur_.xd_twin_m.push_back(rot_ * v2(s.xd_ref_workspace_mps));
+  cur_.xdd_twin_m.push_back(rot_ * v2(s.xdd_ref_workspace_mps2));
 }
 
 void TrialAssembler::on_truth_impedance(const manip::impedance_truth_t& t) {
@@ -121,6 +129,17 @@ void TrialAssembler::on_trial_event(const manip::trial_event_t& e) {
       cur_.perturbed = e.perturbed;
       cur_.angle_rad = e.pert_angle_rad;
       cur_.amplitude_n = e.pert_amplitude_n;
+      keep_all_ = keep_unperturbed_signals_ || cur_.perturbed;
+      {
+        // Trials of a session have similar lengths: reserving the previous
+        // one's plus 1/8 avoids most of the reallocation copies of push_back.
+        const std::size_t guess = last_size_ + last_size_ / 8;
+        cur_.x_m.reserve(guess);
+        if (keep_all_) {
+          for (auto* v : {&cur_.f_sensor_n, &cur_.u_pert_n, &cur_.x_ref_m, &cur_.xd_ref_m, &cur_.xdd_ref_m})
+            v->reserve(guess);
+        }
+      }
       in_trial_ = true;
       bad_ = false;
       bad_reason_.clear();
@@ -140,6 +159,7 @@ void TrialAssembler::on_trial_event(const manip::trial_event_t& e) {
         break;
       }
       in_trial_ = false;
+      if (!cur_.x_m.empty()) last_size_ = cur_.x_m.size();
       if (e.kind == manip::trial_event_t::ABORT) {
         issues_.push_back({cur_.trial, "aborted (" + e.reason + ")"});
         break;

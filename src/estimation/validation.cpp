@@ -8,8 +8,10 @@
 
 namespace manip::estimation {
 
-NrmseCurves nrmse_curves(const std::vector<VariationalWindow>& ws, double t_norm_s, int n_points) {
+NrmseCurves nrmse_curves(const std::vector<VariationalWindow>& ws, double t_norm_s, int n_points,
+                         const std::string& isolation) {
   NrmseCurves c;
+  c.isolation = isolation;
   std::vector<const VariationalWindow*> use;
   for (const auto& w : ws)
     if (!w.dx_true.empty()) use.push_back(&w);
@@ -53,6 +55,7 @@ nlohmann::json to_json(const NrmseCurves& c) {
   nlohmann::json j;
   j["dt_s"] = c.dt_s;
   j["n_trials"] = c.n_trials;
+  j["isolation"] = c.isolation;
   for (std::size_t s = 0; s < 4; ++s) {
     nlohmann::json sig;
     for (int a = 0; a < 2; ++a) {
@@ -70,7 +73,7 @@ nlohmann::json to_json(const NrmseCurves& c) {
 
 std::string format_text(const NrmseCurves& c) {
   std::ostringstream o;
-  o << "NRMSE at " << c.dt_s.back() * 1000 << " ms (mean (std) over " << c.n_trials
+  o << "NRMSE at " << c.dt_s.back() * 1000 << " ms, " << c.isolation << " isolation (mean (std) over " << c.n_trials
     << " trials; paper Fig. 4: dx, dxd < 5 %, dxdd < 7.5 %, du_ext < 15 %):\n";
   for (std::size_t s = 0; s < 4; ++s) {
     const auto& m = c.mean[s].back();
@@ -93,7 +96,8 @@ void write_nrmse_plot(const NrmseCurves& c, const std::string& path) {
   auto py = [&](double y) { return T + (1 - y / ymax) * (H - T - B); };
   o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H
     << "' font-family='sans-serif' font-size='12'><rect width='100%' height='100%' fill='white'/>\n"
-    << "<text x='" << W / 2 << "' y='20' text-anchor='middle' font-size='14'>NRMSE of the estimated variational dynamics (Fig. 4)</text>\n"
+    << "<text x='" << W / 2 << "' y='20' text-anchor='middle' font-size='14'>NRMSE of the estimated variational dynamics (Fig. 4), "
+    << c.isolation << " isolation</text>\n"
     << "<rect x='" << L << "' y='" << T << "' width='" << W - L - R << "' height='" << H - T - B << "' fill='none' stroke='black'/>\n";
   for (int i = 0; i <= 4; ++i) {
     o << "<text x='" << px(c.dt_s.back() * i / 4) << "' y='" << H - B + 15 << "' text-anchor='middle'>"

@@ -1,5 +1,6 @@
 #include "manip/estimation/variational.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -24,6 +25,11 @@ int sg_window_for(const PipelineSettings& s, double fs_hz) {
 }
 
 VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& trial, const PipelineSettings& s) {
+  return isolate_variational(info, trial, s, {});
+}
+
+VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& trial, const PipelineSettings& s,
+                                      std::span<const double> jerk_x2) {
   const double fs = info.fs_hz;
   const double dt = 1.0 / fs;
   if (trial.onset_index < 0) throw std::invalid_argument(trial_name(trial) + ": no perturbation onset");
@@ -58,8 +64,11 @@ VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& 
   std::vector<double> buf(trial.size()), hp(trial.size()), acc(n_win), vel(n_win), pos(n_win), dfs(n_win);
   for (int a = 0; a < 2; ++a) {
     // Jerk -> high-pass -> integrate from onset (§3.1).
-    const auto xa = axis(trial.x_m, a);
-    jerk_filter.apply(xa, buf);
+    if (a == 1 && jerk_x2.size() == trial.size()) {
+      std::copy(jerk_x2.begin(), jerk_x2.end(), buf.begin());  // the caller's, by the same filter
+    } else {
+      jerk_filter.apply(axis(trial.x_m, a), buf);
+    }
     dsp::sosfiltfilt(sos, buf, hp);
     dsp::cumulative_trapezoid(std::span<const double>(hp).subspan(on, n_win), dt, acc);
     dsp::cumulative_trapezoid(acc, dt, vel);

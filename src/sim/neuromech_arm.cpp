@@ -203,6 +203,7 @@ void NeuromechanicalArm::begin_trial(const ReachSpec& reach, std::uint64_t seed)
     throw std::invalid_argument("NeuromechanicalArm::begin_trial: start or goal out of the arm's reach");
   reach_ = reach;
   step_ = 0;
+  sub_ = 0;
   lambda_.setZero();
   xdd_last_.setZero();
   gauss_.seed(seed);
@@ -288,9 +289,10 @@ void NeuromechanicalArm::update_plan() {
   else
     k = posture(plan_.q);
   plan_.qd = k.jinv * s.xd;
+  const Vec2 qdd = k.jinv * (s.xdd - jacobian_dot(k, plan_.qd) * plan_.qd);
+  plan_.qdd = qdd;
   Vec2 tau = Vec2::Zero();
   if (p_.feedforward_enabled) {
-    const Vec2 qdd = k.jinv * (s.xdd - jacobian_dot(k, plan_.qd) * plan_.qd);
     // Inverse dynamics of the plan (eq. 1) with the expected external force on
     // the hand, -(M_load xdd + D_load xd): the admittance the person has learnt.
     const Vec2 f_load = p_.load_mass_kg.cwiseProduct(s.xdd) + p_.load_damping_nspm.cwiseProduct(s.xd);
@@ -375,6 +377,30 @@ void NeuromechanicalArm::endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) {
   dynamics_at(pose_, js_.q_rad, js_.qd_radps, m_x_kg, h_n);
 }
 
+void NeuromechanicalArm::endpoint_dynamics_for_step(double dt_s, Mat2& m_eff_kg, Vec2& h_eff_n) {
+  // As dynamics_at, with the muscles' stiffness and damping forces taken at the middle
+  // of the plant's step (linearised about the start): with tau = A m,
+  //   tau(t + dt/2) = tau - dt/2 [Kq (qd - qd_d) + Dq (qdd - qdd_d)],  Kq, Dq = A diag(K_m, D_m) A^T
+  // (active muscles), qdd = J^-1 (xdd - Jd qd). The xdd term moves to the inertia:
+  //   M_eff = M_x + dt/2 J^-T Dq J^-1,  h_eff = h - dt/2 J^-T [Kq (qd - qd_d) - Dq (J^-1 Jd qd + qdd_d)].
+  // The neural state (activations, noise, delayed feedback) is held over the step.
+  const auto& A = p_.moment_arms_m;
+  const Vec2& q = js_.q_rad;
+  const Vec2& qd = js_.qd_radps;
+  const Muscles m = muscles_at(q, qd);
+  const Posture& k = pose_;
+  const Vec2 tau = A * m.tension;
+  const Mat2 jd = jacobian_dot(k, qd);
+  const Mat2 m_x = k.jinv.transpose() * k.mq * k.jinv;
+  const Vec2 jdqd = jd * qd;
+  const Mat2 kq = A * m.k.cwiseProduct(m.active).asDiagonal() * A.transpose();
+  const Mat2 dq = A * m.d.cwiseProduct(m.active).asDiagonal() * A.transpose();
+  const double half = 0.5 * dt_s;
+  m_eff_kg = m_x + half * (k.jinv.transpose() * dq * k.jinv);
+  const Vec2 dtau = kq * (qd - plan_.qd) - dq * (k.jinv * jdqd + plan_.qdd);
+  h_eff_n = k.jinv.transpose() * (tau - coriolis(k, qd) - half * dtau) + m_x * jdqd;
+}
+
 void NeuromechanicalArm::endpoint_dynamics_at(const Vec2& x, const Vec2& xd, Mat2& m_x_kg, Vec2& h_n) const {
   Vec2 q;
   Posture k;
@@ -382,27 +408,56 @@ void NeuromechanicalArm::endpoint_dynamics_at(const Vec2& x, const Vec2& xd, Mat
   dynamics_at(k, q, k.jinv * xd, m_x_kg, h_n);
 }
 
+void NeuromechanicalArm::integrate(double h, const Vec2& xdd_hand_mps2) {
+  // Joint-space update that is exact for the hand acceleration the plant holds over
+  // the step (the plant's force, like the controller's command, is held per step):
+  //   qdd = J^-1 (xdd - Jd qd);  qd' = qd + h qdd;  q' = q + h (qd + qd') / 2
+  // i.e. q' = q + h qd + h^2/2 qdd. Symplectic Euler (q' = q + h qd') instead moves
+  // the position by h^2 qdd in the first step of a constant force: it applies every
+  // held force half a step early, and that h/2 lead of the response biased impedance
+  // estimates on simulated logs by ~10 % at 4 kHz (docs/simulation.md).
+  Vec2& qd = js_.qd_radps;
+  const Vec2 qdd = pose_.jinv * (xdd_hand_mps2 - jacobian_dot(pose_, qd) * qd);
+  const Vec2 qd0 = qd;
+  qd += h * qdd;
+  set_q(js_.q_rad + (0.5 * h) * (qd0 + qd));
+}
+
+void NeuromechanicalArm::neural_step() {
+  ++step_;
+  for (int i = 0; i < kMuscles; ++i) noise_(i) = noise_rho_ * noise_(i) + noise_sigma_ * gauss_();
+  update_plan();
+  push_error();
+}
+
 void NeuromechanicalArm::advance(double dt_s, const Vec2& xdd_hand_mps2) {
-  const double ratio = dt_s / p_.step_s;
-  const long n = std::lround(ratio);
-  if (n < 1 || std::abs(ratio - static_cast<double>(n)) > 1e-6 * ratio)
-    throw std::invalid_argument("NeuromechanicalArm::advance: dt must be a whole multiple of integration.step_s");
   xdd_last_ = xdd_hand_mps2;
-  const double h = p_.step_s;
-  for (long s = 0; s < n; ++s) {
-    // Semi-implicit (symplectic) Euler with the plant's hand acceleration held
-    // over the step: conserves the energy of the undamped muscle springs (test).
-    // Its h/2 lag of position behind force biases impedance estimates on
-    // simulated logs by about 1 % at 16 kHz (the linear human uses the
-    // trapezoidal position update instead; docs/accuracy-study.md).
-    Vec2& qd = js_.qd_radps;
-    const Vec2 qdd = pose_.jinv * (xdd_hand_mps2 - jacobian_dot(pose_, qd) * qd);
-    qd += h * qdd;
-    set_q(js_.q_rad + h * qd);
-    ++step_;
-    for (int i = 0; i < kMuscles; ++i) noise_(i) = noise_rho_ * noise_(i) + noise_sigma_ * gauss_();
-    update_plan();
-    push_error();
+  const double ratio = dt_s / p_.step_s;
+  if (ratio >= 1.0 - 1e-9 && sub_ == 0) {
+    // The plant's step is a whole number of model steps (the usual case).
+    const long n = std::lround(ratio);
+    if (n < 1 || std::abs(ratio - static_cast<double>(n)) > 1e-6 * ratio)
+      throw std::invalid_argument(
+          "NeuromechanicalArm::advance: dt must be a whole multiple or a whole fraction of integration.step_s");
+    for (long s = 0; s < n; ++s) {
+      integrate(p_.step_s, xdd_hand_mps2);
+      neural_step();
+    }
+    return;
+  }
+  // The plant sub-steps the model step (e.g. manip_rt's 16 kHz sim substeps with a
+  // 4 kHz model step): the mechanics follow every sub-step, the neural state
+  // (plan, delay lines, noise) advances once per model step.
+  const double inv = p_.step_s / dt_s;
+  const long m = std::lround(inv);
+  if (m < 2 || std::abs(inv - static_cast<double>(m)) > 1e-6 * inv || (sub_ != 0 && m != sub_n_))
+    throw std::invalid_argument(
+        "NeuromechanicalArm::advance: dt must be a whole multiple or a whole fraction of integration.step_s");
+  sub_n_ = static_cast<int>(m);
+  integrate(dt_s, xdd_hand_mps2);
+  if (++sub_ == sub_n_) {
+    sub_ = 0;
+    neural_step();
   }
 }
 

@@ -118,7 +118,7 @@ bool NeuromechParams::operator==(const NeuromechParams& o) const {
     if (a.length_m[i] != b.length_m[i] || a.mass_kg[i] != b.mass_kg[i] || a.com_m[i] != b.com_m[i] ||
         a.inertia_kgm2[i] != b.inertia_kgm2[i])
       return false;
-  return step_s == o.step_s && moment_arms_m == o.moment_arms_m && k0_npm == o.k0_npm && k1_per_m == o.k1_per_m &&
+  return step_s == o.step_s && session_step_s == o.session_step_s && moment_arms_m == o.moment_arms_m && k0_npm == o.k0_npm && k1_per_m == o.k1_per_m &&
          stiffness_to_damping_per_s == o.stiffness_to_damping_per_s && tonic_activation_n == o.tonic_activation_n &&
          feedforward_enabled == o.feedforward_enabled && load_mass_kg == o.load_mass_kg &&
          load_damping_nspm == o.load_damping_nspm && feedback == o.feedback && noise_cv == o.noise_cv &&
@@ -132,6 +132,8 @@ void NeuromechParams::disable_feedback() {
 std::optional<std::string> NeuromechParams::invalid_reason() const {
   if (!(std::isfinite(step_s) && step_s > 0.0 && step_s <= 1e-3))
     return "integration.step_s: " + fmt(step_s) + " must be in (0, 0.001] s";
+  if (!(std::isfinite(session_step_s) && session_step_s > 0.0 && session_step_s <= 1e-3))
+    return "integration.session_step_s: " + fmt(session_step_s) + " must be in (0, 0.001] s";
 
   if (auto why = anthropometrics.invalid_reason()) {
     // TwoLinkArm reports "<segment>.<field> <reason>".
@@ -190,6 +192,10 @@ std::optional<std::string> NeuromechParams::invalid_reason() const {
     if (std::abs(steps - std::round(steps)) > 1e-6)
       return key + ".delay_s: " + fmt(f.delay_s) + " s is not a whole number of simulation steps (integration.step_s = " +
              fmt(step_s) + " s)";
+    const double session_steps = f.delay_s / session_step_s;
+    if (std::abs(session_steps - std::round(session_steps)) > 1e-6)
+      return key + ".delay_s: " + fmt(f.delay_s) +
+             " s is not a whole number of session steps (integration.session_step_s = " + fmt(session_step_s) + " s)";
     if (f.enabled && std::lround(steps) < 1)
       return key + ".delay_s: an enabled pathway needs a delay of at least one simulation step (a response without "
                    "delay is the intrinsic muscle impedance, eq. 34)";
@@ -219,8 +225,9 @@ NeuromechParams load_neuromech_params(const std::string& yaml_path) {
   try {
     r.expect_keys(root, "", {"integration", "anthropometrics", "muscles", "feedforward", "feedback", "noise"});
 
-    r.expect_keys(root["integration"], "integration", {"step_s"});
+    r.expect_keys(root["integration"], "integration", {"step_s", "session_step_s"});
     p.step_s = r.number(root["integration"]["step_s"], "integration.step_s");
+    p.session_step_s = r.number(root["integration"]["session_step_s"], "integration.session_step_s");
 
     r.expect_keys(root["anthropometrics"], "anthropometrics", {"upper_arm", "forearm"});
     for (int i = 0; i < 2; ++i) {
@@ -285,6 +292,7 @@ std::string neuromech_params_to_yaml(const NeuromechParams& p) {
   };
   YAML::Node root;
   root["integration"]["step_s"] = p.step_s;
+  root["integration"]["session_step_s"] = p.session_step_s;
   for (int i = 0; i < 2; ++i) {
     YAML::Node s = root["anthropometrics"][kSegments[i]];
     s["length_m"] = p.anthropometrics.length_m[i];

@@ -172,7 +172,7 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       copy2(s.xd_ref_workspace_mps, d.frame.vector_to_workspace(xd_sh));
       // Step the plant over the cycle with the held perturbation force.
       for (int j = 0; j < d.substeps; ++j) {
-        const auto ps = step_ideal_admittance(human, d.admittance, u_pert, h);
+        const auto ps = step_ideal_admittance(human, d.admittance, u_pert, h, d.midpoint_plant);
         if (j == 0) {
           xdd = ps.xdd_mps2;
           f_sensor = ps.f_sensor_n;

@@ -1,6 +1,9 @@
 #include <catch2/catch.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
+#include <vector>
 
 #include "dsp_test_util.hpp"
 #include "manip/dsp/welch.hpp"
@@ -71,6 +74,78 @@ TEST_CASE("welch: whole signal as one segment, zero padded to nfft = 16384") {
   opt.nperseg = 12000;
   opt.nfft = 16384;
   check(welch(x, 4000.0, opt), ref, "welch trial nperseg=12000 nfft=16384");
+}
+
+TEST_CASE("welch: the estimator's shape, a trial zero padded to nfft = 65536 (pruned transform)") {
+  const auto x = manip::dsp::test::quantised_signal("dsp/trial_jerk.txt");
+  const auto ref = read_ref("dsp/welch_trial_nfft65536.txt", 0);
+  WelchOptions opt;
+  opt.nperseg = 12000;
+  opt.nfft = 65536;
+  check(welch(x, 4000.0, opt), ref, "welch trial nperseg=12000 nfft=65536");
+  // The reusing overload gives the same numbers, also when `out` held another size.
+  manip::dsp::Psd out = welch(x, 4000.0);
+  welch(x, 4000.0, opt, out);
+  const auto fresh = welch(x, 4000.0, opt);
+  CHECK(out.pxx == fresh.pxx);
+  CHECK(out.f_hz == fresh.f_hz);
+}
+
+TEST_CASE("welch: odd segment length, zero padded (half-empty last FFT input)") {
+  const auto x = manip::dsp::test::quantised_signal("dsp/trial_jerk.txt");
+  const auto ref = read_ref("dsp/welch_trial_odd_nfft16384.txt", 0);
+  const std::vector<double> head(x.begin(), x.begin() + 3001);
+  WelchOptions opt;
+  opt.nperseg = 3001;
+  opt.nfft = 16384;
+  check(welch(head, 4000.0, opt), ref, "welch nperseg=3001 nfft=16384");
+}
+
+TEST_CASE("welch: power-of-two FFT against a direct DFT for every small size and padding") {
+  // Covers the radix-4 / radix-2 stage mixes and every pruning factor P.
+  for (int nfft = 2; nfft <= 256; nfft *= 2) {
+    for (int len = 1; len <= nfft; len += (len < 8 ? 1 : 7)) {
+      std::vector<double> x(static_cast<std::size_t>(len));
+      for (int i = 0; i < len; ++i) x[static_cast<std::size_t>(i)] = std::sin(0.37 * i * i + 1.0) + 0.1 * i;
+      WelchOptions opt;
+      opt.nperseg = len;
+      opt.nfft = nfft;
+      opt.noverlap = len / 2;
+      if (len == 1) opt.noverlap = 0;
+      const auto got = welch(x, 1.0, opt);
+      // Reference: detrend, periodic Hann, direct DFT in long double, density scaling.
+      const double pi = 3.141592653589793238462643383279502884;
+      long double mean = 0;
+      for (double v : x) mean += v;
+      mean /= len;
+      std::vector<long double> seg(static_cast<std::size_t>(len));
+      long double wsum = 0;
+      for (int i = 0; i < len; ++i) {
+        const long double w = len == 1 ? 1.0L : 0.5L - 0.5L * std::cos(2.0L * pi * i / len);
+        seg[static_cast<std::size_t>(i)] = w * (x[static_cast<std::size_t>(i)] - mean);
+        wsum += w * w;
+      }
+      double peak = 0;
+      std::vector<double> want(static_cast<std::size_t>(nfft / 2 + 1));
+      for (int k = 0; k <= nfft / 2; ++k) {
+        long double re = 0, im = 0;
+        for (int i = 0; i < len; ++i) {
+          const long double a = -2.0L * pi * static_cast<long double>((static_cast<long long>(i) * k) % nfft) / nfft;
+          re += seg[static_cast<std::size_t>(i)] * std::cos(a);
+          im += seg[static_cast<std::size_t>(i)] * std::sin(a);
+        }
+        long double p = (re * re + im * im) / wsum;
+        if (k > 0 && k < nfft / 2) p *= 2;
+        want[static_cast<std::size_t>(k)] = static_cast<double>(p);
+        peak = std::max(peak, want[static_cast<std::size_t>(k)]);
+      }
+      REQUIRE(got.pxx.size() == want.size());
+      double err = 0;
+      for (std::size_t k = 0; k < want.size(); ++k) err = std::max(err, std::abs(got.pxx[k] - want[k]));
+      INFO("nfft " << nfft << " len " << len);
+      CHECK(err <= 1e-13 * std::max(peak, 1e-300));
+    }
+  }
 }
 
 TEST_CASE("welch: odd nfft with explicit overlap, nperseg clamped to a short input") {

@@ -23,21 +23,26 @@ const Summary& session_summary(const Report& r, const std::string& m) {
 }
 }  // namespace
 
-TEST_CASE("pipeline: noise-free linear person, default method within 5% (K) and 8% (D) of truth") {
+TEST_CASE("pipeline: noise-free linear person, pooled methods within 5% (K) and 8% (D) of truth") {
   const auto person = sim::table1_person();
   const auto ms = testutil::simulate_in_memory(testutil::small_design(10), person);
   REQUIRE(ms.trials.size() == 10);
-  const auto r = estimate(ms, {"oe", "paper", "paper-pooled"});
+  const auto r = estimate(ms, {"pem", "oe", "paper", "paper-pooled"});
   REQUIRE(r.n_used == 8);
   REQUIRE(r.truth.available);
   CHECK((r.truth.k_npm - person.k_npm).norm() < 1e-9);
-  const auto& oe = session_summary(r, "oe");
-  INFO("oe D = " << oe.d_nspm << "\nK = " << oe.k_npm);
-  for (int i = 0; i < 2; ++i)
-    for (int j = 0; j < 2; ++j) {
-      CHECK(std::abs(oe.k_npm(i, j) - person.k_npm(i, j)) < 0.05 * std::abs(person.k_npm(i, j)));
-      CHECK(std::abs(oe.d_nspm(i, j) - person.d_nspm(i, j)) < 0.08 * std::abs(person.d_nspm(i, j)));
-    }
+  for (const char* m : {"pem", "oe"}) {
+    const auto& oe = session_summary(r, m);
+    INFO(m << " D = " << oe.d_nspm << "\nK = " << oe.k_npm);
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) {
+        CHECK(std::abs(oe.k_npm(i, j) - person.k_npm(i, j)) < 0.05 * std::abs(person.k_npm(i, j)));
+        CHECK(std::abs(oe.d_nspm(i, j) - person.d_nspm(i, j)) < 0.08 * std::abs(person.d_nspm(i, j)));
+      }
+  }
+  const auto& pem = session_summary(r, "pem");
+  REQUIRE(pem.disturbance);
+  CHECK(pem.disturbance->box_jenkins);
   // The paper's isolation: Δx tracks the twin difference (§4.3, Fig. 4 reports < 5%).
   int n = 0;
   for (const auto& t : r.trials)
@@ -47,10 +52,12 @@ TEST_CASE("pipeline: noise-free linear person, default method within 5% (K) and 
     }
   CHECK(n == 8);
   // Per-angle summaries exist for all 8 angles.
-  int angles = 0;
-  for (const auto& s : r.summaries)
-    if (s.method == "oe" && s.group.rfind("angle", 0) == 0) ++angles;
-  CHECK(angles == 8);
+  for (const char* m : {"pem", "oe"}) {
+    int angles = 0;
+    for (const auto& s : r.summaries)
+      if (s.method == m && s.group.rfind("angle", 0) == 0) ++angles;
+    CHECK(angles == 8);
+  }
 }
 
 TEST_CASE("pipeline: eq. 21 and the force-sensor route agree on the ideal admittance") {

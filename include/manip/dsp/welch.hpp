@@ -23,8 +23,13 @@ struct Psd {
 // Throws std::invalid_argument for fs_hz <= 0, nperseg < 1, noverlap >= nperseg
 // (or < -1), nfft < nperseg. Empty x gives an empty Psd (as scipy).
 // Allocates (result, one segment buffer, FFT plan cache per thread).
-// FFT: built-in radix-2 for power-of-two nfft (fast: use these), Eigen's
-// kissfft (mixed radix, ~10x slower, O(n^2) for large prime factors) otherwise.
+// FFT: built-in radix-4 for power-of-two nfft (fast: use these; zero padding
+// beyond nperseg costs little, the transform is pruned), Eigen's kissfft
+// (mixed radix, ~10x slower, O(n^2) for large prime factors) otherwise.
 [[nodiscard]] Psd welch(std::span<const double> x, double fs_hz, const WelchOptions& opt = {});
+
+// The same, into `out`, reusing its storage (a caller computing one PSD per
+// trial avoids two nfft/2+1 allocations per call). Same values, bit for bit.
+void welch(std::span<const double> x, double fs_hz, const WelchOptions& opt, Psd& out);
 
 }  // namespace manip::dsp

@@ -1,6 +1,7 @@
 #pragma once
 // Impedance fits (paper §3.3) and the project's default output-error method.
 #include <limits>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -8,6 +9,18 @@
 #include "manip/estimation/variational.hpp"
 
 namespace manip::estimation {
+
+// The person's own motion (everything the perturbation did not cause) as the
+// prediction-error method models it (pem.hpp), SI units.
+struct DisturbanceModel {
+  bool box_jenkins{true};   // structure: box-jenkins, else armax (pem.hpp)
+  double drive_psd{0};      // intensity of the smooth drive's second derivative [N^2/s^3]
+  double motor_noise_n{0};  // stationary std of the OU motor-noise force per axis [N]
+  double motor_tau_s{0};    // its correlation time [s]
+  double meas_std_m{0};     // position measurement noise std [m]
+  double neg_log_likelihood{0};
+  Mat2 d_nspm{Mat2::Zero()}, k_npm{Mat2::Zero()};  // dynamics of the person's own motion (box-jenkins)
+};
 
 // One estimate of the endpoint impedance with its uncertainty, shoulder-frame axes.
 struct ImpedanceEstimate {
@@ -27,6 +40,7 @@ struct ImpedanceEstimate {
   int iterations{0};
   bool identifiable{true};
   std::string flag;                // why not identifiable / not converged
+  std::optional<DisturbanceModel> disturbance;  // prediction-error method only
 };
 
 // Flag rule (docs/estimator.md): an estimate is not identifiable when any

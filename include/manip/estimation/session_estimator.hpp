@@ -1,13 +1,21 @@
 #pragma once
 // Everything estimate_impedance does to one session: trials in, report out.
-// Perturbed trials are kept (they are needed after the PSDs when the cut-off
-// is chosen automatically); unperturbed trials only feed the PSD and are
-// dropped at once, so memory stays bounded however long the session.
+// Unperturbed trials only feed the PSD and are dropped at once; perturbed
+// trials are reduced to their isolated windows at once, or, when the cut-off
+// is chosen automatically (known only after the last PSD), kept whole until
+// finish(). Memory stays bounded however long the session.
 #include <map>
+#include <memory>
+#include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "manip/dsp/savgol.hpp"
+#include "manip/dsp/welch.hpp"
+
 #include "manip/estimation/impedance.hpp"
+#include "manip/estimation/pem.hpp"
 #include "manip/estimation/trial_data.hpp"
 #include "manip/estimation/variational.hpp"
 
@@ -16,7 +24,9 @@ namespace manip::estimation {
 // Method names (docs/estimator.md):
 //   paper         per-trial equation error on high-pass-isolated signals (§3, eq. 30-32); mean (std) over trials
 //   paper-pooled  the same signals, one fit over all perturbed trials; estimate (SE, 95% CI)
-//   oe            default: pooled causal output error with per-trial polynomial; jackknife SE, 95% CI
+//   pem           default: pooled causal prediction error (maximum likelihood) with a model of the person's
+//                 own motion and motor noise (pem.hpp); sandwich SE, 95% CI
+//   oe            pooled causal output error with per-trial polynomial; jackknife SE, 95% CI
 //   oe-trial      the output-error fit per trial; mean (std) over trials
 std::vector<std::string> all_methods();
 std::string default_method();
@@ -28,6 +38,7 @@ struct EstimatorSettings {
   int psd_nfft{65536};
   LsOptions ls{};
   OeSettings oe{};
+  PemSettings pem{};
   std::vector<std::string> methods{default_method()};
   bool keep_windows{false};  // keep variational windows for --export-signals / --plots
 };
@@ -53,6 +64,7 @@ struct Summary {
   bool identifiable{true};
   std::string flag;
   int n_flagged_trials{0};
+  std::optional<DisturbanceModel> disturbance;  // pem: the fitted model of the person's own motion
 };
 
 struct PsdReport {
@@ -88,22 +100,50 @@ struct Report {
 class SessionEstimator {
  public:
   explicit SessionEstimator(EstimatorSettings s);
+  // Trials must come in log order (the PSD sums and the per-trial lists are
+  // accumulated in call order). With a fixed cut-off (no cutoff_auto) a
+  // perturbed trial is isolated here at once and only its windows are kept;
+  // with cutoff_auto it is kept whole until finish().
   void add_trial(const SessionInfo& info, TrialData&& t);
   // Runs the methods; issues/warnings gathered while reading are appended.
   Report finish(std::vector<TrialIssue> issues, std::vector<std::string> warnings);
 
  private:
+  // Per perturbed trial: M_BSP at onset, isolated signals, OE window (or the
+  // reason it could not be used), in trial order.
+  struct Prepared {
+    int trial{-1};
+    std::optional<std::string> error;
+    VariationalWindow vw;
+    Mat2 m_bsp{Mat2::Zero()};
+    OeWindow ow;
+    OeWindow pw;  // the prediction-error window (its own pre-onset span)
+    bool has_truth{false};
+    Mat2 truth_d{Mat2::Zero()}, truth_k{Mat2::Zero()}, truth_m{Mat2::Zero()};
+    std::string truth_model;
+  };
+  // jerk_x2: the trial's x2 jerk if already computed (for the PSD), else empty.
+  Prepared prepare(const TrialData& t, const PipelineSettings& pipe, std::span<const double> jerk_x2) const;
+
   EstimatorSettings s_;
   SessionInfo info_;
   bool have_info_{false};
-  std::vector<TrialData> perturbed_;
+  std::vector<TrialData> perturbed_;  // cutoff_auto only
+  std::vector<Prepared> prepared_;    // fixed cut-off
   std::vector<double> psd_unpert_, psd_pert_, f_;
-  int n_unpert_{0}, n_pert_psd_{0}, n_trials_{0};
-  std::vector<TrialIssue> local_issues_;
+  int n_unpert_{0}, n_pert_psd_{0}, n_trials_{0}, n_perturbed_{0};
+  // Reused per trial: the jerk filter (designed once per session), the jerk and the PSD.
+  std::unique_ptr<dsp::SavgolFilter> jerk_filter_;
+  std::vector<double> jerk_, jerk_out_;
+  dsp::Psd psd_;
 };
 
 // Convenience: read a log file and estimate. Throws std::runtime_error for
-// unusable files (message names the file and the reason).
+// unusable files (message names the file and the reason). The log is decoded
+// on the calling thread while a second thread runs SessionEstimator::add_trial
+// on each trial as it completes (a bounded queue of a few trials between them
+// keeps memory bounded); the result is identical to a sequential run, since
+// one worker takes the trials in log order.
 Report estimate_log(const std::string& path, const EstimatorSettings& s);
 
 }  // namespace manip::estimation

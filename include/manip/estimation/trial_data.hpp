@@ -75,6 +75,11 @@ class TrialAssembler final : public logging::SessionHandler {
   void on_truth_impedance(const manip::impedance_truth_t& msg) override;
   void on_warning(const std::string& message) override { warnings_.push_back(message); }
 
+  // false: for trials that START unperturbed keep only x_m (the estimator uses
+  // nothing else of them: they only feed the PSD), which saves most of the
+  // copying and memory of reading a session. Checks are unchanged. Default true.
+  void set_keep_unperturbed_signals(bool keep) { keep_unperturbed_signals_ = keep; }
+
   // Call after the stream ended: reports a trial left open.
   void finish();
 
@@ -89,6 +94,12 @@ class TrialAssembler final : public logging::SessionHandler {
   void drop(const std::string& reason);
   TrialCallback cb_;
   SessionInfo info_;
+  // info_.frame's rotation, evaluated once: it was a sin and a cos per
+  // converted vector (9 per state message), 14 % of estimate_log's CPU time.
+  Mat2 rot_{Mat2::Identity()};
+  bool keep_unperturbed_signals_{true};
+  bool keep_all_{true};  // of the current trial
+  std::size_t last_size_{0};  // samples of the previous trial, to reserve the next one
   bool has_session_{false};
   bool warned_no_session_{false};
   bool in_trial_{false};

@@ -17,10 +17,12 @@ struct NrmseCurves {
   std::vector<double> dt_s;
   std::array<std::vector<Vec2>, 4> mean, std;  // per signal, per Δt, per axis (over trials)
   int n_trials{0};
+  std::string isolation{"paper"};  // which isolation produced the estimates (text, JSON, plot title)
 };
 
 // Only windows carrying twin truth count. Throws std::invalid_argument if none does.
-NrmseCurves nrmse_curves(const std::vector<VariationalWindow>& windows, double t_norm_s = 0.15, int n_points = 30);
+NrmseCurves nrmse_curves(const std::vector<VariationalWindow>& windows, double t_norm_s = 0.15, int n_points = 30,
+                         const std::string& isolation = "paper");
 nlohmann::json to_json(const NrmseCurves& c);
 std::string format_text(const NrmseCurves& c);
 void write_nrmse_plot(const NrmseCurves& c, const std::string& svg_path);

@@ -6,6 +6,7 @@
 //   3. cumulative trapezoid from the onset with zero initial values -> Δẍ, Δẋ, Δx,
 //   4. Δu_ext from the admittance model (eq. 21) and, beside it, from the
 //      measured handle force: Δu_ext = -(Δf_s + M_handle Δẍ).
+#include <span>
 #include <string>
 #include <vector>
 
@@ -42,6 +43,11 @@ int sg_window_for(const PipelineSettings& s, double fs_hz);
 // Throws std::invalid_argument naming the trial if it is too short for the
 // filters or the window, or has no onset.
 VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& trial, const PipelineSettings& s);
+// The same, given the trial's x2 jerk as principal_axis_jerk() returns it (the
+// estimator has it from the PSD): the x2 SG pass is not repeated. Identical
+// results; an empty or wrongly sized span is ignored.
+VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& trial, const PipelineSettings& s,
+                                      std::span<const double> jerk_x2);
 
 // Principal-axis (x2) jerk of a whole trial by the SG filter of the pipeline (for PSDs, Fig. 3).
 std::vector<double> principal_axis_jerk(const SessionInfo& info, const TrialData& trial, const PipelineSettings& s);

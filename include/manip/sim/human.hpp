@@ -36,6 +36,14 @@ class HumanModel {
   // Endpoint inertia M_x [kg] and the endpoint force h [N] the arm produces at
   // the current state (muscles, feedback, noise, minus velocity-product terms).
   virtual void endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) = 0;
+  // The same for a plant step of dt_s whose acceleration is held over the step: a
+  // model may return an effective inertia and force that treat its own damping and
+  // stiffness at the middle of the step (linearly implicit), so that the step is
+  // second-order accurate. Default: endpoint_dynamics (explicit).
+  virtual void endpoint_dynamics_for_step(double dt_s, Mat2& m_eff_kg, Vec2& h_eff_n) {
+    (void)dt_s;
+    endpoint_dynamics(m_eff_kg, h_eff_n);
+  }
   // Advance time by dt with the endpoint acceleration imposed by the plant.
   virtual void advance(double dt_s, const Vec2& xdd_hand_mps2) = 0;
   [[nodiscard]] virtual Vec2 hand_position_m() const = 0;

@@ -22,6 +22,7 @@ namespace manip::sim {
 struct SessionDesign {
   double sample_rate_hz{4000.0};
   int substeps{4};                        // integration steps per sample (semi-implicit Euler at 16 kHz)
+  bool midpoint_plant{false};             // step_ideal_admittance(..., midpoint): manip_sim's neuromech arm at 4 kHz
   int n_movements{100};                   // paper §5.2
   std::vector<double> angles_deg{30, 60, 120, 150, 210, 240, 300, 330};  // paper §4.2
   int reps_per_angle{3};                  // 8 x 3 = 24 perturbed (paper §5.2)
