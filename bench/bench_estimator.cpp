@@ -1,9 +1,9 @@
 // Estimator throughput on one session log (docs/benchmarks.md, "## Estimator").
 //   floor      read_log + decode only (handler touches each decoded state)
 //   e2e-paper  estimate_log with methods = {"paper"}
-//   e2e-oe     estimate_log with the default methods ({"oe"})
+//   e2e-default     estimate_log with the default methods ({"pem"})
 //   proc-paper SessionEstimator (add_trial + finish) on trials already in memory, {"paper"}
-//   proc-oe    the same with {"oe"}
+//   proc-default    the same with the default methods
 // The measurements are interleaved per repetition (the machine is noisy); the
 // median, min and max of each are printed, one line each:
 //   RESULT <name> median_s=<> min_s=<> max_s=<> reps=<>
@@ -73,7 +73,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> only;
   app.add_option("log", log, "LCM session log")->required()->check(CLI::ExistingFile);
   app.add_option("--reps", reps, "repetitions (>= 1; median reported)");
-  app.add_option("--only", only, "subset of: floor e2e-paper e2e-oe proc-paper proc-oe");
+  app.add_option("--only", only, "subset of: floor e2e-paper e2e-default proc-paper proc-default");
   CLI11_PARSE(app, argc, argv);
   auto want = [&](const std::string& n) { return only.empty() || std::find(only.begin(), only.end(), n) != only.end(); };
 
@@ -87,7 +87,7 @@ int main(int argc, char** argv) {
   std::vector<est::TrialIssue> issues;
   std::vector<std::string> warnings;
   std::size_t samples = 0;
-  if (want("proc-paper") || want("proc-oe")) {
+  if (want("proc-paper") || want("proc-default")) {
     const auto t0 = Clock::now();
     est::TrialAssembler asmb([&](const est::SessionInfo& i, est::TrialData&& t) {
       info = i;
@@ -113,7 +113,7 @@ int main(int argc, char** argv) {
       g_sink = g_sink + h.sum;
       if (r == 0) std::fprintf(stderr, "floor: %ld states, %ld twin states\n", h.n, h.n_truth);
     }
-    for (const auto& [name, s] : {std::pair{std::string("e2e-paper"), paper}, std::pair{std::string("e2e-oe"), oe}}) {
+    for (const auto& [name, s] : {std::pair{std::string("e2e-paper"), paper}, std::pair{std::string("e2e-default"), oe}}) {
       if (!want(name)) continue;
       const double c0 = process_cpu_s();
       const auto t0 = Clock::now();
@@ -123,7 +123,7 @@ int main(int argc, char** argv) {
       g_sink = g_sink + rep.summaries.size();
       if (r == 0) std::fprintf(stderr, "%s: %d trials, %d perturbed, %d used\n", name.c_str(), rep.n_trials, rep.n_perturbed, rep.n_used);
     }
-    for (const auto& [name, s] : {std::pair{std::string("proc-paper"), paper}, std::pair{std::string("proc-oe"), oe}}) {
+    for (const auto& [name, s] : {std::pair{std::string("proc-paper"), paper}, std::pair{std::string("proc-default"), oe}}) {
       if (!want(name)) continue;
       auto copy = trials;  // not timed
       auto iss = issues;
@@ -138,8 +138,8 @@ int main(int argc, char** argv) {
       g_sink = g_sink + rep.summaries.size();
     }
   }
-  for (const auto& name : {"floor", "e2e-paper", "e2e-oe", "proc-paper", "proc-oe", "floor-cpu", "e2e-paper-cpu",
-                            "e2e-oe-cpu", "proc-paper-cpu", "proc-oe-cpu"}) {
+  for (const auto& name : {"floor", "e2e-paper", "e2e-default", "proc-paper", "proc-default", "floor-cpu", "e2e-paper-cpu",
+                            "e2e-default-cpu", "proc-paper-cpu", "proc-default-cpu"}) {
     const auto it = t.find(name);
     if (it == t.end()) continue;
     const auto& v = it->second;

@@ -55,7 +55,7 @@ echo "== SciPy reference ($PY_REPS processing reps, $DECODE_REPS decode reps)" >
 
 echo "== peak RSS of estimate_impedance (3 runs per method)" >&2
 : >"$OUT/rss.txt"
-for m in paper oe; do
+for m in paper pem oe; do
   for _ in 1 2 3; do
     /usr/bin/time -f "RSS $m %M %e" "$EST" "$LOG" --method "$m" -q >/dev/null 2>>"$OUT/rss.txt" || true
   done
@@ -80,9 +80,9 @@ for line in open(sys.argv[3]):
 rows = [
     ("floor", "C++ read_log + decode only"),
     ("e2e-paper", "C++ estimate_log, methods {paper}"),
-    ("e2e-oe", "C++ estimate_log, methods {oe} (default)"),
+    ("e2e-default", "C++ estimate_log, default methods {pem}"),
     ("proc-paper", "C++ SessionEstimator on in-memory trials, {paper}"),
-    ("proc-oe", "C++ SessionEstimator on in-memory trials, {oe}"),
+    ("proc-default", "C++ SessionEstimator on in-memory trials, {pem} (default)"),
     ("py-decode", "Python lcm.EventLog read + decode + trial arrays"),
     ("py-proc-full", "SciPy chain, paper method (SG d=1,2,3 as briefed)"),
     ("py-proc-minimal", "SciPy chain, paper method (SG d=3 only, as C++)"),
@@ -109,7 +109,7 @@ def ratio(a, b, label, target):
         q = r[a][0] / r[b][0]
         print(f"- {label}: {q:.2f} (target {target})")
 ratio("e2e-paper", "floor", "end-to-end {paper} / floor", "<= 1.5")
-ratio("e2e-oe", "floor", "end-to-end {oe} / floor", "<= 1.5")
+ratio("e2e-default", "floor", "end-to-end {pem} (default) / floor", "<= 1.5")
 ratio("py-proc-full", "proc-paper", "SciPy processing (full) / C++ processing {paper}", ">= 10")
 ratio("py-proc-minimal", "proc-paper", "SciPy processing (minimal) / C++ processing {paper}", ">= 10")
 ratio("py-decode", "floor", "Python read+decode / C++ floor", "info")

@@ -4,6 +4,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <unsupported/Eigen/MatrixFunctions>
 
@@ -150,8 +151,14 @@ Gains riccati(const Discrete& m, std::size_t n, double sigma_n) {
   return g;
 }
 
+struct Model {
+  Discrete m;
+  Gains g;
+};
+
 struct Problem {
   std::span<const OeWindow> windows;
+  std::shared_ptr<const Model> held;   // the filter, when the noise model is held
   Layout lay;
   std::vector<std::vector<Vec2>> y_um;  // positions relative to the window's first sample [µm]
   std::vector<int> active;              // windows in the fit (jackknife drops one)
@@ -227,11 +234,9 @@ struct Score {
   Eigen::MatrixXd trial_grad;  // gradient per trial (columns): the sandwich's meat
 };
 
-struct Model {
-  Discrete m;
-  Gains g;
-};
 Model model_at(const Problem& pr, const Eigen::VectorXd& p) {
+  // Box-Jenkins with the noise model held: the filter does not depend on D, K.
+  if (pr.held && pr.lay.bj) return *pr.held;
   Model md;
   md.m = discretise(pr.lay, p, pr.m_tot, pr.d_adm, pr.h);
   md.g = riccati(md.m, pr.n, std::exp(p(pr.lay.log0() + 1)));
@@ -338,20 +343,31 @@ ScoringResult maximise_likelihood(const Problem& pr, Eigen::VectorXd p, int max_
   for (int it = 0; it < max_iter; ++it) {
     out.iterations = it + 1;
     bool improved = false;
-    const auto nf = static_cast<Eigen::Index>(pr.free.size());
+    // Active set: a noise parameter at its bound whose gradient points out of
+    // the box stays there this iteration (noise-free data drive σ_n and r to
+    // their floors; projecting a full step there would stall the iteration).
+    std::vector<int> act;
+    for (const int i : pr.free) {
+      if (i >= pr.lay.log0()) {
+        const int b = i - pr.lay.log0();
+        if ((p(i) <= kLogLo[b] && sc.grad(i) > 0) || (p(i) >= kLogHi[b] && sc.grad(i) < 0)) continue;
+      }
+      act.push_back(i);
+    }
+    const auto nf = static_cast<Eigen::Index>(act.size());
     Eigen::MatrixXd ff(nf, nf);
     Eigen::VectorXd gf(nf);
     for (Eigen::Index a = 0; a < nf; ++a) {
-      gf(a) = sc.grad(pr.free[static_cast<std::size_t>(a)]);
+      gf(a) = sc.grad(act[static_cast<std::size_t>(a)]);
       for (Eigen::Index b = 0; b < nf; ++b)
-        ff(a, b) = sc.fisher(pr.free[static_cast<std::size_t>(a)], pr.free[static_cast<std::size_t>(b)]);
+        ff(a, b) = sc.fisher(act[static_cast<std::size_t>(a)], act[static_cast<std::size_t>(b)]);
     }
     for (int tries = 0; tries < 14; ++tries) {
       Eigen::MatrixXd a = ff;
       a.diagonal() += lambda * ff.diagonal().cwiseMax(1e-30);
       const Eigen::VectorXd step = a.ldlt().solve(gf);
       Eigen::VectorXd pn = p;
-      for (Eigen::Index q = 0; q < nf; ++q) pn(pr.free[static_cast<std::size_t>(q)]) -= step(q);
+      for (Eigen::Index q = 0; q < nf; ++q) pn(act[static_cast<std::size_t>(q)]) -= step(q);
       project(pr.lay, pn);
       const double cn = nll(pr, pn);
       if (std::isfinite(cn) && cn < sc.nll) {
@@ -359,8 +375,8 @@ ScoringResult maximise_likelihood(const Problem& pr, Eigen::VectorXd p, int max_
         p = pn;
         lambda = std::max(lambda / 10.0, 1e-8);
         improved = true;
-        // 1e-6 nats: far below the likelihood's statistical resolution (~0.5).
-        if (dec < 1e-6) out.converged = true;
+        // Far below the likelihood's statistical resolution (~0.5 nats).
+        if (dec < 1e-6 + 1e-9 * std::abs(cn)) out.converged = true;
         break;
       }
       lambda *= 10.0;
@@ -398,6 +414,12 @@ ImpedanceEstimate fit_prediction_error(std::span<const OeWindow> windows, const 
     p0.segment(L, 4) << std::log(fd.drive_psd), std::log(fd.motor_noise_n), std::log(fd.motor_tau_s),
         std::log(fd.meas_std_m * fd.meas_std_m * 1e12);
     pr.free.resize(7);  // D, K only
+    if (lay.bj) {
+      auto md = std::make_shared<Model>();
+      md->m = discretise(lay, p0, pr.m_tot, pr.d_adm, pr.h);
+      md->g = riccati(md->m, pr.n, std::exp(p0(L + 1)));
+      pr.held = std::move(md);
+    }
   }
   const auto fit = maximise_likelihood(pr, p0, s.max_iterations);
   const Eigen::VectorXd& p = fit.theta;
