@@ -70,11 +70,11 @@ int main(int argc, char** argv) {
   };
   nlohmann::json raw = nlohmann::json::array();
   std::cout << "| person | noise | method | element | truth | median est | median rel. error | IQR of rel. error | "
-               "|rel. error| median | 95% CI coverage |\n|---|---|---|---|---|---|---|---|---|---|\n";
+               "|rel. error| median | 95% CI coverage | median SE / |truth| |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& person : split(persons)) {
     for (const auto& noise : split(noises)) {
       // per method, per element: estimates, covered flags
-      std::map<std::string, std::array<std::vector<double>, 7>> est, covered;
+      std::map<std::string, std::array<std::vector<double>, 7>> est, covered, rel_se;
       sim::LinearHumanParams truth_p = person == "stiff" ? sim::stiff_person() : sim::table1_person();
       for (int s = 0; s < sessions; ++s) {
         sim::SessionDesign d;
@@ -110,6 +110,9 @@ int main(int argc, char** argv) {
             est[sm.method][static_cast<std::size_t>(e)].push_back(v);
             if (std::isfinite(lo) && std::isfinite(hi))
               covered[sm.method][static_cast<std::size_t>(e)].push_back(lo <= tv && tv <= hi ? 1.0 : 0.0);
+            // SE (pooled) or std over trials (per-trial methods), relative to the truth: the
+            // spread the method itself claims, to set beside the spread it achieves.
+            rel_se[sm.method][static_cast<std::size_t>(e)].push_back(elem(sm.d_spread, sm.k_spread, e) / std::abs(tv));
             row[kElem[e]] = v;
           }
           row["identifiable"] = sm.identifiable;
@@ -137,7 +140,7 @@ int main(int argc, char** argv) {
                     << median(rel) * 100 << "% | " << (quantile(rel, 0.75) - quantile(rel, 0.25)) * 100 << "% | "
                     << median(absrel) * 100 << "% | "
                     << (std::isfinite(c) ? std::to_string(static_cast<int>(std::lround(c * 100))) + "%" : "n/a")
-                    << " |\n";
+                    << " | " << median(rel_se[method][static_cast<std::size_t>(e)]) * 100 << "% |\n";
         }
       }
       std::cout.flush();

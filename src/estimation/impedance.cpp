@@ -1,5 +1,7 @@
 #include "manip/estimation/impedance.hpp"
 
+#include "manip/estimation/levenberg_marquardt.hpp"
+
 #include <Eigen/Dense>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -63,6 +65,16 @@ void assign(ImpedanceEstimate& e, const std::vector<Param>& lay, const Eigen::Ve
 }
 
 }  // namespace
+
+Eigen::VectorXd jackknife_se(const std::vector<Eigen::VectorXd>& loo) {
+  const auto n = static_cast<double>(loo.size());
+  Eigen::VectorXd mean = Eigen::VectorXd::Zero(loo.front().size());
+  for (const auto& t : loo) mean += t;
+  mean /= n;
+  Eigen::VectorXd var = Eigen::VectorXd::Zero(mean.size());
+  for (const auto& t : loo) var += (t - mean).array().square().matrix();
+  return (var * ((n - 1.0) / n)).cwiseSqrt();
+}
 
 double t_quantile_975(int dof) {
   static const double table[] = {12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
@@ -184,7 +196,7 @@ OeWindow make_oe_window(const SessionInfo& info, const TrialData& t, const Mat2&
   return w;
 }
 
-std::vector<Vec2> simulate_variational(const OeWindow& w, const Mat2& d, const Mat2& k) {
+VariationalZoh discretise_variational(const OeWindow& w, const Mat2& d, const Mat2& k) {
   // Exact zero-order-hold discretisation of the coupled arm + admittance.
   const Mat2 minv = w.m_total_kg.inverse();
   Eigen::Matrix<double, 6, 6> aug = Eigen::Matrix<double, 6, 6>::Zero();
@@ -193,8 +205,11 @@ std::vector<Vec2> simulate_variational(const OeWindow& w, const Mat2& d, const M
   aug.block<2, 2>(2, 2) = -minv * (d + w.d_adm_nspm);
   aug.block<2, 2>(2, 4) = minv;
   const Eigen::Matrix<double, 6, 6> e = (aug / w.fs_hz).exp();
-  const Eigen::Matrix4d phi = e.block<4, 4>(0, 0);
-  const Eigen::Matrix<double, 4, 2> gam = e.block<4, 2>(0, 4);
+  return {e.block<4, 4>(0, 0), e.block<4, 2>(0, 4)};
+}
+
+std::vector<Vec2> simulate_variational(const OeWindow& w, const Mat2& d, const Mat2& k) {
+  const auto [phi, gam] = discretise_variational(w, d, k);
   std::vector<Vec2> out(w.x_m.size(), Vec2::Zero());
   Eigen::Vector4d z = Eigen::Vector4d::Zero();
   for (std::size_t i = static_cast<std::size_t>(w.onset_offset); i + 1 < out.size(); ++i) {
@@ -280,65 +295,6 @@ struct OeProblem {
   }
 };
 
-struct LmResult {
-  Eigen::VectorXd theta;
-  Eigen::MatrixXd jac;
-  Eigen::VectorXd res;
-  int iterations{0};
-  bool converged{false};
-};
-
-LmResult levenberg_marquardt(const OeProblem& prob, Eigen::VectorXd th, int skip, int max_iter) {
-  LmResult out;
-  Eigen::VectorXd r = prob.residual(th, skip);
-  double cost = r.squaredNorm();
-  double lambda = 1e-3;
-  const auto np = th.size();
-  Eigen::MatrixXd jac(r.size(), np);
-  for (int it = 0; it < max_iter; ++it) {
-    out.iterations = it + 1;
-    for (Eigen::Index p = 0; p < np; ++p) {  // forward differences; the model is smooth in θ
-      Eigen::VectorXd tp = th;
-      const double h = 1e-6 * std::max(1.0, std::abs(th(p)));
-      tp(p) += h;
-      jac.col(p) = (prob.residual(tp, skip) - r) / h;
-    }
-    const Eigen::MatrixXd jtj = jac.transpose() * jac;
-    const Eigen::VectorXd g = jac.transpose() * r;
-    bool improved = false;
-    for (int tries = 0; tries < 12; ++tries) {
-      Eigen::MatrixXd aug = jtj;
-      aug.diagonal() += lambda * jtj.diagonal().cwiseMax(1e-30);
-      const Eigen::VectorXd step = -aug.ldlt().solve(g);
-      const Eigen::VectorXd tn = th + step;
-      const Eigen::VectorXd rn = prob.residual(tn, skip);
-      const double cn = rn.squaredNorm();
-      if (std::isfinite(cn) && cn < cost) {
-        const double rel = (cost - cn) / std::max(cost, 1e-300);
-        th = tn;
-        r = rn;
-        cost = cn;
-        lambda = std::max(lambda / 10.0, 1e-12);
-        improved = true;
-        if (rel < 1e-12 || step.norm() < 1e-10 * (1.0 + th.norm())) {
-          out.converged = true;
-        }
-        break;
-      }
-      lambda *= 10.0;
-    }
-    if (!improved) {
-      out.converged = true;  // no descent direction left: at a minimum
-      break;
-    }
-    if (out.converged) break;
-  }
-  out.theta = th;
-  out.res = r;
-  out.jac = jac;
-  return out;
-}
-
 }  // namespace
 
 ImpedanceEstimate fit_output_error(std::span<const OeWindow> windows, const OeSettings& s) {
@@ -346,7 +302,12 @@ ImpedanceEstimate fit_output_error(std::span<const OeWindow> windows, const OeSe
   OeProblem prob(windows, s.poly_order);
   Eigen::VectorXd th0(7);
   th0 << 10.0, 0.0, 0.0, 10.0, 200.0, 0.0, 200.0;  // a generic arm; LM moves far from it
-  auto fit = levenberg_marquardt(prob, th0, -1, s.max_iterations);
+  LmOptions lo;
+  lo.max_iterations = s.max_iterations;
+  const auto fit_skipping = [&](const Eigen::VectorXd& start, int skip) {
+    return levenberg_marquardt([&](const Eigen::VectorXd& th) { return prob.residual(th, skip); }, start, lo);
+  };
+  auto fit = fit_skipping(th0, -1);
   if (s.prewhiten_order > 0) {
     // Yule-Walker on the first fit's residuals, pooled over windows and axes.
     const int p = s.prewhiten_order;
@@ -370,7 +331,7 @@ ImpedanceEstimate fit_output_error(std::span<const OeWindow> windows, const OeSe
     const Eigen::VectorXd a = r.ldlt().solve(rhs);
     if (a.allFinite()) {
       prob.ar.assign(a.data(), a.data() + a.size());
-      fit = levenberg_marquardt(prob, fit.theta, -1, s.max_iterations);
+      fit = fit_skipping(fit.theta, -1);
     }
   }
   ImpedanceEstimate e;
@@ -399,13 +360,8 @@ ImpedanceEstimate fit_output_error(std::span<const OeWindow> windows, const OeSe
     // correlated (unmodelled movement, motor noise), so the least-squares SE
     // understates the error; trials are the independent units.
     std::vector<Eigen::VectorXd> loo;
-    for (int i = 0; i < n; ++i) loo.push_back(levenberg_marquardt(prob, fit.theta, i, s.max_iterations).theta);
-    Eigen::VectorXd mean_t = Eigen::VectorXd::Zero(7);
-    for (const auto& t : loo) mean_t += t;
-    mean_t /= n;
-    Eigen::VectorXd var = Eigen::VectorXd::Zero(7);
-    for (const auto& t : loo) var += (t - mean_t).array().square().matrix();
-    se = (var * (static_cast<double>(n - 1) / n)).cwiseSqrt();
+    for (int i = 0; i < n; ++i) loo.push_back(fit_skipping(fit.theta, i).theta);
+    se = jackknife_se(loo);
     e.se_kind = "jackknife over trials";
     e.ci_factor = t_quantile_975(n - 1);
   }

@@ -88,14 +88,7 @@ Vec7 refine(const OeWindow& w, const Eigen::MatrixXd& q, const Vec7& th0, const 
 
 ModelResponse simulate_variational_states(const OeWindow& w, const Mat2& d, const Mat2& k) {
   const Mat2 minv = w.m_total_kg.inverse();
-  Eigen::Matrix<double, 6, 6> aug = Eigen::Matrix<double, 6, 6>::Zero();
-  aug.block<2, 2>(0, 2) = Mat2::Identity();
-  aug.block<2, 2>(2, 0) = -minv * k;
-  aug.block<2, 2>(2, 2) = -minv * (d + w.d_adm_nspm);
-  aug.block<2, 2>(2, 4) = minv;
-  const Eigen::Matrix<double, 6, 6> e = (aug / w.fs_hz).exp();
-  const Eigen::Matrix4d phi = e.block<4, 4>(0, 0);
-  const Eigen::Matrix<double, 4, 2> gam = e.block<4, 2>(0, 4);
+  const auto [phi, gam] = discretise_variational(w, d, k);
   ModelResponse r;
   const std::size_t n = w.x_m.size();
   r.x.assign(n, Vec2::Zero());

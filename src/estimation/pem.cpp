@@ -471,12 +471,7 @@ ImpedanceEstimate fit_prediction_error(std::span<const OeWindow> windows, const 
       sub.active.erase(sub.active.begin() + i);
       loo.push_back(maximise_likelihood(sub, p, s.max_iterations).theta.head(7));
     }
-    Eigen::VectorXd mt = Eigen::VectorXd::Zero(7);
-    for (const auto& t : loo) mt += t;
-    mt /= nw;
-    Eigen::VectorXd var = Eigen::VectorXd::Zero(7);
-    for (const auto& t : loo) var += (t - mt).array().square().matrix();
-    se = (var * (static_cast<double>(nw - 1) / nw)).cwiseSqrt();
+    se = jackknife_se(loo);
     e.se_kind = "jackknife over trials";
     e.ci_factor = t_quantile_975(nw - 1);
   }

@@ -6,17 +6,14 @@
 
 #include "manip/common/perturbation.hpp"
 #include "manip/estimation/impedance.hpp"
+#include "reference_arm.hpp"
 
 using namespace manip;
 using namespace manip::estimation;
+using namespace manip::testutil;
 
 namespace {
 
-const Mat2 kD = (Mat2() << 10.98, -7.94, -8.54, 6.75).finished();
-const Mat2 kK = (Mat2() << 110.52, -106.05, -106.05, 313.75).finished();
-const Mat2 kM = (Mat2() << 1.52, -0.82, -0.82, 1.41).finished();
-const Mat2 kMdev = Mat2::Identity() * 5.3;
-const Mat2 kDadm = Mat2::Identity() * 15.0;
 
 // Independent reference: RK4 at 64 kHz of the coupled arm + ideal admittance
 // with the perturbation force held per 4 kHz sample.

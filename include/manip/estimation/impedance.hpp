@@ -97,6 +97,17 @@ OeWindow make_oe_window(const SessionInfo& info, const TrialData& trial, const M
 ImpedanceEstimate fit_output_error(std::span<const OeWindow> windows, const OeSettings& s);
 // Simulated Δx of one window for given D, K (exposed for tests and plots).
 std::vector<Vec2> simulate_variational(const OeWindow& w, const Mat2& d_nspm, const Mat2& k_npm);
+// The exact zero-order-hold discretisation behind it: state (Δx, Δẋ),
+// z[k+1] = phi z[k] + gam u[k] at the window's sample rate.
+struct VariationalZoh {
+  Eigen::Matrix4d phi;
+  Eigen::Matrix<double, 4, 2> gam;
+};
+VariationalZoh discretise_variational(const OeWindow& w, const Mat2& d_nspm, const Mat2& k_npm);
+
+// Delete-one-trial jackknife standard error from the leave-one-out estimates
+// (Efron's (n−1)/n Σ (θ_i − θ̄)²; trials are the independent units).
+Eigen::VectorXd jackknife_se(const std::vector<Eigen::VectorXd>& leave_one_out);
 
 // Student-t 0.975 quantile for `dof` degrees of freedom.
 double t_quantile_975(int dof);
