@@ -79,7 +79,7 @@ int main(int argc, char** argv) {
 
   est::EstimatorSettings paper;
   paper.methods = {"paper"};
-  est::EstimatorSettings oe;  // default methods
+  est::EstimatorSettings dflt;  // default methods
 
   // Trials in memory for the processing-only runs (loaded once, not timed).
   est::SessionInfo info;
@@ -113,7 +113,7 @@ int main(int argc, char** argv) {
       g_sink = g_sink + h.sum;
       if (r == 0) std::fprintf(stderr, "floor: %ld states, %ld twin states\n", h.n, h.n_truth);
     }
-    for (const auto& [name, s] : {std::pair{std::string("e2e-paper"), paper}, std::pair{std::string("e2e-default"), oe}}) {
+    for (const auto& [name, s] : {std::pair{std::string("e2e-paper"), paper}, std::pair{std::string("e2e-default"), dflt}}) {
       if (!want(name)) continue;
       const double c0 = process_cpu_s();
       const auto t0 = Clock::now();
@@ -123,7 +123,7 @@ int main(int argc, char** argv) {
       g_sink = g_sink + rep.summaries.size();
       if (r == 0) std::fprintf(stderr, "%s: %d trials, %d perturbed, %d used\n", name.c_str(), rep.n_trials, rep.n_perturbed, rep.n_used);
     }
-    for (const auto& [name, s] : {std::pair{std::string("proc-paper"), paper}, std::pair{std::string("proc-default"), oe}}) {
+    for (const auto& [name, s] : {std::pair{std::string("proc-paper"), paper}, std::pair{std::string("proc-default"), dflt}}) {
       if (!want(name)) continue;
       auto copy = trials;  // not timed
       auto iss = issues;
