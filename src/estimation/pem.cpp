@@ -8,7 +8,6 @@
 #include <stdexcept>
 #include <unsupported/Eigen/MatrixFunctions>
 
-
 namespace manip::estimation {
 namespace {
 
