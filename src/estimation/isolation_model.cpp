@@ -116,9 +116,6 @@ ModelIsolation isolate_model_based(const SessionInfo& info, const std::vector<Tr
   const TwoLinkArm arm(info.anthropometrics);
   std::vector<OeWindow> ow, pw;  // response windows; pem fit windows (longer pre-onset)
   std::vector<VariationalWindow> vw;
-  OeSettings pem_window = s.oe;
-  pem_window.t_pre_s = s.pem.t_pre_s;
-  pem_window.t_est_s = s.pem.t_est_s;
   for (const auto& t : trials) {
     if (!t.perturbed || t.onset_index < 0) continue;
     try {
@@ -129,7 +126,7 @@ ModelIsolation isolate_model_based(const SessionInfo& info, const std::vector<Tr
       pipe.t_est_s = s.oe.t_est_s;
       auto v = isolate_variational(info, t, pipe);  // layout, u_pert and (simulated logs) the twin truth
       auto o = make_oe_window(info, t, *m_bsp, s.oe);
-      auto p = s.session_fit == ModelIsolationSettings::SessionFit::pem ? make_oe_window(info, t, *m_bsp, pem_window)
+      auto p = s.session_fit == ModelIsolationSettings::SessionFit::pem ? make_pem_window(info, t, *m_bsp, s.pem)
                                                                          : OeWindow{};
       vw.push_back(std::move(v));
       ow.push_back(std::move(o));

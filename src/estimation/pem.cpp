@@ -394,6 +394,13 @@ ScoringResult maximise_likelihood(const Problem& pr, Eigen::VectorXd p, int max_
 
 }  // namespace
 
+OeWindow make_pem_window(const SessionInfo& info, const TrialData& trial, const Mat2& m_bsp, const PemSettings& s) {
+  OeSettings span;
+  span.t_pre_s = s.t_pre_s;
+  span.t_est_s = s.t_est_s;
+  return make_oe_window(info, trial, m_bsp, span);
+}
+
 ImpedanceEstimate fit_prediction_error(std::span<const OeWindow> windows, const PemSettings& s) {
   if (windows.empty()) throw std::invalid_argument("prediction-error fit: no perturbed trials");
   const Layout lay{s.structure == PemStructure::box_jenkins};

@@ -174,10 +174,8 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& t, const P
                                   ", " + std::to_string(x_on.y()) + ") m out of the arm's reach");
     p.vw = isolate_variational(info_, t, pipe, jerk_x2);
     p.ow = make_oe_window(info_, t, *m_bsp, s_.oe);
-    OeSettings pem_window = s_.oe;
-    pem_window.t_pre_s = s_.pem.t_pre_s;
-    pem_window.t_est_s = s_.pem.t_est_s;
-    p.pw = make_oe_window(info_, t, *m_bsp, pem_window);
+    if (std::find(s_.methods.begin(), s_.methods.end(), "pem") != s_.methods.end())
+      p.pw = make_pem_window(info_, t, *m_bsp, s_.pem);
     p.m_bsp = *m_bsp;
     if (t.has_truth) {
       p.has_truth = true;

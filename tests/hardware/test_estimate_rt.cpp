@@ -4,6 +4,7 @@
 // 2 kHz drive rate, 1 um encoders) costs the estimate.
 #include <catch2/catch.hpp>
 
+#include "offline_run.hpp"
 #include "sanitized.hpp"
 
 #include <chrono>
@@ -47,11 +48,7 @@ namespace est = manip::estimation;
 
 est::Report estimate_rendered(const RtConfig& cfg, const std::string& path) {
   hw::SimBackend sim(cfg, hw::make_sim_human(cfg));
-  hw::RunOptions opt;
-  opt.log_path = path;
-  opt.overwrite_log = true;
-  opt.lcm_url = "none";
-  opt.quiet = true;
+  const auto opt = offline_run_options(path);
   std::ostringstream out;
   const auto rep = hw::run_session(cfg, sim, opt, out);
   REQUIRE(rep.exit_code == 0);

@@ -11,6 +11,7 @@
 #include "manip/estimation/session_estimator.hpp"
 #include "manip/hardware/backend.hpp"
 #include "manip/hardware/runner.hpp"
+#include "offline_run.hpp"
 #include "sanitized.hpp"
 
 using manip::control::load_rt_config;
@@ -29,11 +30,7 @@ TEST_CASE("sim backend: the neuromechanical arm runs a session inside the loop a
   auto made = hw::make_backend("sim", cfg);
   REQUIRE(made.backend);
   const auto path = (std::filesystem::temp_directory_path() / ("manip_rt_neuromech_" + std::to_string(::getpid()) + ".lcm")).string();
-  hw::RunOptions opt;
-  opt.log_path = path;
-  opt.overwrite_log = true;
-  opt.lcm_url = "none";
-  opt.quiet = true;
+  const auto opt = offline_run_options(path);
   std::ostringstream out;
   const auto rep = hw::run_session(cfg, *made.backend, opt, out);
   INFO(out.str() << rep.summary());

@@ -2,6 +2,7 @@
 // threads), checked from the log file they write.
 #include <catch2/catch.hpp>
 
+#include "offline_run.hpp"
 #include "sanitized.hpp"
 
 #include <sys/resource.h>
@@ -248,11 +249,7 @@ TEST_CASE("the disk filling up during a session ends it safely and loudly (exit 
   auto* sim = dynamic_cast<hw::SimBackend*>(made.backend.get());
   REQUIRE(sim);
   const std::string path = tmp("fsize");
-  hw::RunOptions opt;
-  opt.log_path = path;
-  opt.overwrite_log = true;
-  opt.lcm_url = "none";
-  opt.quiet = true;
+  const auto opt = offline_run_options(path);
   std::ostringstream out;
   rlimit old{};
   REQUIRE(getrlimit(RLIMIT_FSIZE, &old) == 0);

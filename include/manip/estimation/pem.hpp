@@ -57,6 +57,9 @@ struct PemSettings {
 // PemSettings::t_pre_s); all windows must have the same length. The Kalman
 // gains are shared by all trials, so the inertia is the mean of the windows'
 // M_total (M_BSP differs by well under 1 % between trial onsets).
+// The fit's window of one trial: make_oe_window with PemSettings' own span.
+OeWindow make_pem_window(const SessionInfo& info, const TrialData& trial, const Mat2& m_bsp, const PemSettings& s);
+
 // The noise model at the optimum is returned in ImpedanceEstimate::disturbance.
 ImpedanceEstimate fit_prediction_error(std::span<const OeWindow> windows, const PemSettings& s);
 

@@ -1,0 +1,15 @@
+#pragma once
+// Run options of the offline session tests: write `log_path` (replacing an
+// old file), no LCM bus, nothing on stdout.
+#include <string>
+
+#include "manip/hardware/runner.hpp"
+
+inline manip::hardware::RunOptions offline_run_options(const std::string& log_path) {
+  manip::hardware::RunOptions opt;
+  opt.log_path = log_path;
+  opt.overwrite_log = true;
+  opt.lcm_url = "none";
+  opt.quiet = true;
+  return opt;
+}
