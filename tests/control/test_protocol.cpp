@@ -8,7 +8,7 @@
 #include <set>
 
 #include "manip/control/protocol.hpp"
-#include "manip/control/rng.hpp"
+#include "manip/common/rng.hpp"
 #include "manip/trial_event_t.hpp"
 #include "test_support.hpp"
 
@@ -20,10 +20,10 @@ int deg(double rad) { return static_cast<int>(std::lround(rad * 180.0 / std::num
 }  // namespace
 
 TEST_CASE("portable RNG reproduces SplitMix64", "[protocol][rng]") {
-  PortableRng r(0);
+  manip::PortableRng r(0);
   CHECK(r.next() == 0xE220A8397B1DCDAFull);  // SplitMix64 reference output for seed 0
   CHECK(r.next() == 0x6E789E6AA1B965F4ull);
-  PortableRng a(42), b(42);
+  manip::PortableRng a(42), b(42);
   for (int i = 0; i < 100; ++i) REQUIRE(a.below(7) == b.below(7));
   for (int i = 0; i < 1000; ++i) {
     const double u = a.uniform();

@@ -29,7 +29,7 @@
 #include "manip/common/perturbation.hpp"
 #include "manip/control/config.hpp"
 #include "manip/control/records.hpp"
-#include "manip/control/rng.hpp"
+#include "manip/common/rng.hpp"
 #include "manip/control/trigger.hpp"
 
 namespace manip::control {

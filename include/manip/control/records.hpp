@@ -11,7 +11,7 @@
 #include <readerwriterqueue/readerwriterqueue.h>
 
 #include "manip/common/types.hpp"
-#include "manip/control/codes.hpp"
+#include "manip/schema/codes.hpp"
 #include "manip/state_t.hpp"
 
 namespace manip::control {

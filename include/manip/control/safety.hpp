@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "manip/common/types.hpp"
-#include "manip/control/codes.hpp"
+#include "manip/schema/codes.hpp"
 #include "manip/control/config.hpp"
 #include "manip/control/records.hpp"
 

@@ -27,7 +27,7 @@
 
 #include "manip/common/frames.hpp"
 #include "manip/control/config.hpp"
-#include "manip/control/rng.hpp"
+#include "manip/common/rng.hpp"
 #include "manip/hardware/backend.hpp"
 #include "manip/sim/human.hpp"
 
@@ -79,8 +79,8 @@ class SimBackend final : public Backend {
   double dt_;
   int substeps_;
   Vec2 m_stage_handle_;
-  control::PortableRng rng_;
-  control::PortableRng noise_rng_;
+  PortableRng rng_;
+  PortableRng noise_rng_;
   bool started_{false};
   bool first_read_{true};
   bool enabled_{false};

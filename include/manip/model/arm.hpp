@@ -13,7 +13,7 @@ namespace manip {
 struct Anthropometrics {
   // Index 0: upper arm, 1: forearm + hand. com: distance of the centre of mass
   // from the proximal joint; inertia: about the centre of mass.
-  // Defaults (config/participant.yaml cites them): lengths Selen, Franklin &
+  // Defaults (config/rt.yaml cites them; schema::SessionDescription holds them): lengths Selen, Franklin &
   // Wolpert 2009; masses, centres of mass and inertias Shadmehr & Mussa-Ivaldi 1994.
   double length_m[2]{0.31, 0.34};
   double mass_kg[2]{1.93, 1.52};

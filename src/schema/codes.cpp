@@ -1,8 +1,8 @@
-#include "manip/control/codes.hpp"
+#include "manip/schema/codes.hpp"
 
 #include "manip/command_t.hpp"
 
-namespace manip::control {
+namespace manip::schema {
 
 const char* mode_name(Mode m) {
   switch (m) {
@@ -124,4 +124,4 @@ const char* command_kind_name(std::int8_t kind) {
   }
 }
 
-}  // namespace manip::control
+}  // namespace manip::schema

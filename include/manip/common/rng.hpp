@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <numbers>
 
-namespace manip::control {
+namespace manip {
 
 class PortableRng {
  public:
@@ -55,4 +55,4 @@ void portable_shuffle(It first, It last, PortableRng& rng) {
   }
 }
 
-}  // namespace manip::control
+}  // namespace manip
