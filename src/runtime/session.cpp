@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <future>
 #include <memory>
 #include <sstream>
@@ -158,6 +159,18 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
     go_promise.set_value(run);
     if (!run) loop_thread.join();
   };
+  // An exception during set-up (e.g. std::bad_alloc) must not leave the loop
+  // thread waiting for "go" (std::terminate on its destruction).
+  struct LoopGuard {
+    std::function<void()> release;
+    ~LoopGuard() { release(); }
+  } const loop_guard{[&] {
+    release_loop(false);
+    if (loop_thread.joinable()) {
+      ctl.request_stop(StopReason::kRequested);  // the orderly stop ends a running loop
+      loop_thread.join();
+    }
+  }};
   auto abort_run = [&](int code, const std::string& msg) {
     release_loop(false);
     return fail(code, msg);
