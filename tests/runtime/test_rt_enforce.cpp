@@ -68,7 +68,7 @@ std::string tmp_log(const char* name) {
 
 }  // namespace
 
-TEST_CASE("--require-rt: a loop thread that cannot get SCHED_FIFO/mlock never cycles, exit 9", "[realtime][session]") {
+TEST_CASE("require-rt: a loop thread that cannot get SCHED_FIFO/mlock never cycles, exit 9", "[realtime][session]") {
   const RtConfig cfg;
   CountingBackend backend;
   RunOptions opt;
