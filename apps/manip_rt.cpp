@@ -5,31 +5,36 @@
 #include <ctime>
 #include <iostream>
 
-#include "manip/control/config.hpp"
-#include "manip/hardware/backend.hpp"
-#include "manip/hardware/runner.hpp"
+#include "manip/common/errors.hpp"
+#include "manip/common/exit_codes.hpp"
+#include "manip/runtime/backends.hpp"
+#include "manip/runtime/config.hpp"
+#include "manip/runtime/session.hpp"
 #include "manip/version.hpp"
 
 namespace {
 std::atomic<bool> g_interrupt{false};
 extern "C" void on_signal(int) { g_interrupt.store(true); }
 
+// The rows of common/exit_codes.hpp that manip_rt uses.
 const char* kExitCodes =
-    "Exit codes:\n"
+    "Exit codes (the table shared by every manip program):\n"
     "  0    session complete, stopped by STOP_SESSION, or --duration reached\n"
-    "  1    unexpected internal error\n"
     "  2    bad command line\n"
     "  3    configuration invalid or unreadable (message names file, line, key, reason)\n"
-    "  4    backend unavailable or failed to start (--backend can: not implemented yet)\n"
-    "  5    --require-rt: no PREEMPT_RT kernel or no real-time privileges\n"
     "  6    log file exists (use --force), cannot be created, or writing failed (e.g. disk full)\n"
     "  7    session ended by a safety fault (unattended runs, --exit-on-fault)\n"
-    "  8    LCM bus cannot be created with the URL (--lcm-url none runs without it)\n"
+    "  8    backend unavailable or failed to start (--backend can: not implemented yet)\n"
+    "  9    --require-rt: no PREEMPT_RT kernel, no real-time privileges, or the loop thread\n"
+    "       could not get SCHED_FIFO/mlock (checked before the first cycle)\n"
+    "  10   LCM bus cannot be created with the URL (--lcm-url none runs without it)\n"
+    "  70   unexpected internal error (a bug: please report it)\n"
     "  130  interrupted (SIGINT/SIGTERM): stopped safely, log closed\n";
 }  // namespace
 
 int main(int argc, char** argv) {
-  namespace hw = manip::hardware;
+  namespace rt = manip::runtime;
+  namespace ec = manip::exit_code;
   CLI::App app{std::string("manip_rt ") + manip::kVersion +
                ": 4 kHz admittance controller of the 2-axis manipulandum (paper §5.1-5.2)"};
   app.footer(kExitCodes);
@@ -42,9 +47,9 @@ int main(int argc, char** argv) {
   app.add_option("--config", config, "configuration YAML")->capture_default_str();
   app.add_option("--log", log, "LCM log file to write (default: manip_rt-<session_id>-<UTC time>.lcm)");
   app.add_flag("--force", force, "overwrite an existing log file");
-  auto* rt = app.add_flag("--realtime", realtime, "pace the loop in real time at the sample rate (SCHED_FIFO)");
+  auto* rt_flag = app.add_flag("--realtime", realtime, "pace the loop in real time at the sample rate (SCHED_FIFO)");
   app.add_flag("--afap,--as-fast-as-possible", afap, "run the simulation as fast as possible (default for sim)")
-      ->excludes(rt);
+      ->excludes(rt_flag);
   app.add_flag("--require-rt", require_rt, "refuse to run without a PREEMPT_RT kernel and real-time privileges");
   app.add_option("--lcm-url", lcm_url, "LCM URL for the live bus (default: bus.lcm_url; 'none' = no bus)");
   app.add_option("--duration", duration, "stop after this many seconds of loop time (0 = whole session)")
@@ -59,35 +64,31 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int rc = app.exit(e);
-    return rc == 0 ? 0 : hw::exit_code::kUsage;
+    return rc == 0 ? 0 : ec::kUsage;
   }
 
   try {
-    manip::control::ConfigOverrides ov;
+    rt::ConfigOverrides ov;
     if (!lcm_url.empty()) ov.emplace_back("bus.lcm_url", "\"" + lcm_url + "\"");
     if (seed >= 0) ov.emplace_back("protocol.seed", std::to_string(seed));
-    manip::control::RtConfig cfg = manip::control::load_rt_config(config, ov);
+    rt::RtConfig cfg = rt::load_rt_config(config, ov);
     if (trials > 0) {
-      for (auto& o : manip::control::trials_overrides(cfg, trials)) ov.push_back(o);
-      cfg = manip::control::load_rt_config(config, ov);
+      for (auto& o : rt::trials_overrides(cfg, trials)) ov.push_back(o);
+      cfg = rt::load_rt_config(config, ov);
     }
 
     if (backend == "can" && !afap) realtime = true;
-    auto made = hw::make_backend(backend, cfg);
-    if (!made.backend) {
-      std::cerr << "manip_rt: " << made.error << "\n";
-      return made.exit_code;
-    }
+    const std::unique_ptr<manip::hardware::Backend> hw_backend = rt::make_backend(backend, cfg);
     if (log.empty()) {
       char ts[32];
       const std::time_t now = std::time(nullptr);
       std::strftime(ts, sizeof ts, "%Y%m%dT%H%M%SZ", std::gmtime(&now));
-      log = "manip_rt-" + cfg.participant.session_id + "-" + ts + ".lcm";
+      log = "manip_rt-" + cfg.session.session_id + "-" + ts + ".lcm";
     }
 
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
-    hw::RunOptions opt;
+    rt::RunOptions opt;
     opt.log_path = log;
     opt.overwrite_log = force;
     opt.realtime = realtime && !afap;
@@ -103,15 +104,18 @@ int main(int argc, char** argv) {
                 << (opt.realtime ? "paced in real time" : "as fast as possible") << ", "
                 << cfg.protocol.movements << " movements (" << cfg.perturbed_count() << " perturbed), log " << log
                 << "\n";
-    const hw::RunReport rep = hw::run_session(cfg, *made.backend, opt, std::cerr);
+    const rt::RunReport rep = rt::run_session(cfg, *hw_backend, opt, std::cerr);
     if (rep.cycles > 0 && (!quiet || rep.exit_code != 0)) std::cerr << rep.summary();
     std::cerr << "manip_rt: " << rep.message << " (exit " << rep.exit_code << ")\n";
     return rep.exit_code;
-  } catch (const manip::control::ConfigError& e) {
+  } catch (const manip::ConfigError& e) {
     std::cerr << "manip_rt: configuration error: " << e.what() << "\n";
-    return hw::exit_code::kConfig;
+    return e.exit_code();
+  } catch (const manip::Error& e) {
+    std::cerr << "manip_rt: " << e.what() << "\n";
+    return e.exit_code();
   } catch (const std::exception& e) {
     std::cerr << "manip_rt: internal error: " << e.what() << "\n";
-    return hw::exit_code::kError;
+    return ec::kInternal;
   }
 }

@@ -10,8 +10,8 @@
 #include <iostream>
 #include <sstream>
 
-#include "manip/control/config.hpp"
-#include "manip/hardware/runner.hpp"
+#include "manip/runtime/config.hpp"
+#include "manip/runtime/session.hpp"
 #include "manip/hardware/sim_backend.hpp"
 
 int main(int argc, char** argv) {
@@ -32,17 +32,17 @@ int main(int argc, char** argv) {
       log.empty() ? (std::filesystem::temp_directory_path() / ("bench_rt_" + std::to_string(::getpid()) + ".lcm")).string()
                   : log;
   try {
-    const manip::control::RtConfig cfg = manip::control::load_rt_config(
+    const manip::runtime::RtConfig cfg = manip::runtime::load_rt_config(
         config, {{"loop.priority", std::to_string(priority)}, {"loop.cpu", std::to_string(cpu)}});
-    manip::hardware::SimBackend sim(cfg, manip::hardware::make_sim_human(cfg));
-    manip::hardware::RunOptions opt;
+    manip::hardware::SimBackend sim(cfg, cfg.sim, manip::hardware::make_sim_human(cfg, cfg.sim));
+    manip::runtime::RunOptions opt;
     opt.log_path = path;
     opt.overwrite_log = true;
     opt.realtime = true;
     opt.duration_s = seconds;
     opt.lcm_url = lcm_url;
     opt.quiet = true;
-    const auto rep = manip::hardware::run_session(cfg, sim, opt, std::cerr);
+    const auto rep = manip::runtime::run_session(cfg, sim, opt, std::cerr);
     if (log.empty()) std::filesystem::remove(path);
     if (!histogram.empty()) {
       std::FILE* f = std::fopen(histogram.c_str(), "w");

@@ -17,17 +17,18 @@ void copy2(double* dst, const Vec2& v) {
 bool finite2(const Vec2& v) { return std::isfinite(v[0]) && std::isfinite(v[1]); }
 }  // namespace
 
-Controller::Controller(const RtConfig& cfg, ControllerQueues queues, const ControllerOptions& opt)
+Controller::Controller(const ControlConfig& cfg, ControllerQueues queues, const ControllerOptions& opt)
     : cfg_(cfg),
       q_(queues),
       opt_(opt),
-      period_us_(std::llround(1e6 / cfg.loop.sample_rate_hz)),
-      drive_decimation_(std::max(1, cfg.loop.drive_decimation())),
-      bus_decimation_(std::max(1, static_cast<int>(std::lround(cfg.loop.sample_rate_hz / cfg.bus.state_rate_hz)))),
-      frame_(cfg.frames),
-      adm_(cfg.admittance.m_adm_kg, cfg.admittance.d_adm_nspm, cfg.loop.dt_s()),
+      period_us_(std::llround(1e6 / cfg.session.sample_rate_hz)),
+      drive_decimation_(std::max(1, cfg.drive_decimation())),
+      bus_decimation_(
+          std::max(1, static_cast<int>(std::lround(cfg.session.sample_rate_hz / cfg.cycle.live_state_rate_hz)))),
+      frame_(cfg.session.frame),
+      adm_(cfg.session.m_adm_kg, cfg.session.d_adm_nspm, cfg.dt_s()),
       pd_{cfg.pd.kp_npm, cfg.pd.kd_nspm, cfg.pd.ff_mass_kg, cfg.pd.ff_viscous_nspm, cfg.pd.ff_sensor_force_gain},
-      monitor_(cfg.safety, cfg.loop),
+      monitor_(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz),
       protocol_(cfg) {}
 
 void Controller::request_stop(StopReason why) {
@@ -36,8 +37,8 @@ void Controller::request_stop(StopReason why) {
 }
 
 void Controller::push_record(const LoopRecord& r, bool to_bus) {
-  if (q_.log && !q_.log->try_enqueue(r)) status_.log_drops.store(status_.log_drops.load(kRelaxed) + 1, kRelaxed);
-  if (to_bus && q_.bus && !q_.bus->try_enqueue(r))
+  if (q_.log && !q_.log->try_push(r)) status_.log_drops.store(status_.log_drops.load(kRelaxed) + 1, kRelaxed);
+  if (to_bus && q_.bus && !q_.bus->try_push(r))
     status_.bus_drops.store(status_.bus_drops.load(kRelaxed) + 1, kRelaxed);
 }
 
@@ -154,7 +155,7 @@ const ActuatorCommand& Controller::step(const SensorReading& in, std::int64_t cy
   // 1. commands (bounded per cycle: a flood cannot stretch the cycle)
   if (q_.commands) {
     Command c;
-    for (int i = 0; i < cfg_.loop.max_commands_per_cycle && q_.commands->try_dequeue(c); ++i) handle_command(c, in);
+    for (int i = 0; i < cfg_.cycle.max_commands_per_cycle && q_.commands->try_pop(c); ++i) handle_command(c, in);
   }
 
   // 2. orderly stop

@@ -34,10 +34,10 @@ std::vector<TrialSpec> make_schedule(const ProtocolConfig& protocol, const Pertu
   return out;
 }
 
-Protocol::Protocol(const RtConfig& cfg)
+Protocol::Protocol(const ControlConfig& cfg)
     : p_(cfg.protocol),
-      profile_{cfg.perturbation.duration_s, cfg.perturbation.amplitude_n},
-      fs_(cfg.loop.sample_rate_hz),
+      profile_{cfg.session.perturbation.duration_s, cfg.session.perturbation.amplitude_n},
+      fs_(cfg.session.sample_rate_hz),
       start_(cfg.protocol.start_shoulder_m),
       goal_(cfg.protocol.goal_shoulder_m),
       start_hold_cycles_(std::max<std::int64_t>(1, std::llround(cfg.protocol.start_hold_s * fs_))),
@@ -45,7 +45,7 @@ Protocol::Protocol(const RtConfig& cfg)
       timeout_cycles_(std::llround(cfg.protocol.trial_timeout_s * fs_)),
       schedule_(make_schedule(cfg.protocol, cfg.perturbation, cfg.perturbed_count())),
       requeue_rng_(cfg.protocol.seed ^ 0x5EED0F00DULL),
-      trigger_(cfg.perturbation.trigger_x2_shoulder_m, fs_) {
+      trigger_(cfg.session.perturbation.trigger_x2_shoulder_m, fs_) {
   // Room for every possible re-queue, so insert() never reallocates in the loop.
   schedule_.reserve(schedule_.size() + static_cast<std::size_t>(cfg.perturbed_count()) *
                                            static_cast<std::size_t>(cfg.protocol.max_requeues) +

@@ -5,12 +5,12 @@
 
 namespace manip::control {
 
-SafetyMonitor::SafetyMonitor(const SafetyConfig& s, const LoopConfig& l)
+SafetyMonitor::SafetyMonitor(const SafetyConfig& s, const CycleConfig& c, double sample_rate_hz)
     : s_(s),
-      consecutive_limit_(l.overrun_fault_consecutive),
-      per_second_limit_(l.overrun_fault_per_second),
-      window_cycles_(std::llround(l.sample_rate_hz)),
-      overrun_ring_(static_cast<std::size_t>(l.overrun_fault_per_second), 0) {}
+      consecutive_limit_(c.overrun_fault_consecutive),
+      per_second_limit_(c.overrun_fault_per_second),
+      window_cycles_(std::llround(sample_rate_hz)),
+      overrun_ring_(static_cast<std::size_t>(c.overrun_fault_per_second), 0) {}
 
 void SafetyMonitor::reset_history() {
   have_seq_ = false;

@@ -1,30 +1,46 @@
 #include "manip/hardware/backend.hpp"
 
-#include "manip/hardware/sim_backend.hpp"
-
 namespace manip::hardware {
 
-BackendResult make_backend(const std::string& name, const control::RtConfig& cfg) {
-  BackendResult r;
-  if (name == "sim") {
-    try {
-      r.backend = std::make_unique<SimBackend>(cfg, make_sim_human(cfg));
-    } catch (const std::exception& e) {  // e.g. the neuromech arm's YAML
-      r.exit_code = exit_code::kConfig;
-      r.error = std::string("sim backend: ") + e.what();
-    }
-    return r;
+const char* state_name(BackendState s) {
+  switch (s) {
+    case BackendState::kUnconfigured: return "unconfigured";
+    case BackendState::kInactive: return "inactive (configured, drives disabled)";
+    case BackendState::kActive: return "active (drives enabled)";
+    case BackendState::kFinalized: return "finalized";
   }
-  if (name == "can") {
-    r.exit_code = exit_code::kBackendUnavailable;
-    r.error =
-        "backend 'can' (CANopen CiA 402 drives over SocketCAN) is not implemented yet (a later issue); "
-        "refusing to start. Use --backend sim.";
-    return r;
-  }
-  r.exit_code = exit_code::kUsage;
-  r.error = "unknown backend '" + name + "' (choose sim or can)";
-  return r;
+  return "?";
+}
+
+void Backend::require(BackendState s, const char* call) const {
+  if (state_ != s)
+    throw BackendStateError("backend '" + name() + "': " + call + " refused in state " + state_name(state_) +
+                            " (needs " + state_name(s) + ")");
+}
+
+void Backend::configure() {
+  require(BackendState::kUnconfigured, "configure()");
+  on_configure();
+  state_ = BackendState::kInactive;
+}
+
+void Backend::enable() {
+  require(BackendState::kInactive, "enable()");
+  on_enable();
+  state_ = BackendState::kActive;
+}
+
+void Backend::disable() noexcept {
+  if (state_ != BackendState::kActive) return;
+  on_disable();
+  state_ = BackendState::kInactive;
+}
+
+void Backend::shutdown() noexcept {
+  if (state_ == BackendState::kFinalized) return;
+  disable();
+  if (state_ == BackendState::kInactive) on_shutdown();
+  state_ = BackendState::kFinalized;
 }
 
 }  // namespace manip::hardware

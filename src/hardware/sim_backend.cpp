@@ -9,17 +9,17 @@
 
 namespace manip::hardware {
 
-std::unique_ptr<sim::HumanModel> make_sim_human(const control::RtConfig& cfg) {
-  const auto& h = cfg.sim.human;
+std::unique_ptr<sim::HumanModel> make_sim_human(const control::ControlConfig& law, const SimConfig& sim) {
+  const auto& h = sim.human;
   if (h.model == "neuromech") {
     // Throws (file: key: reason) on a bad YAML; advance() rejects a substep
     // that is not a multiple of the arm's integration step at the first cycle,
     // so check it here, at start-up.
     const auto np = sim::load_neuromech_params(h.arm_config);
-    const double dt = 1.0 / (cfg.loop.sample_rate_hz * cfg.sim.substeps);
+    const double dt = 1.0 / (law.session.sample_rate_hz * sim.substeps);
     const double ratio = dt / np.step_s;
     if (std::abs(ratio - std::round(ratio)) > 1e-6 * ratio || std::round(ratio) < 1.0)
-      throw std::runtime_error(h.arm_config + ": integration.step_s " + std::to_string(np.step_s) +
+      throw ConfigError(h.arm_config + ": integration.step_s " + std::to_string(np.step_s) +
                                " s does not divide the sim substep " + std::to_string(dt) + " s");
     return std::make_unique<sim::NeuromechanicalArm>(np);
   }
@@ -34,31 +34,34 @@ std::unique_ptr<sim::HumanModel> make_sim_human(const control::RtConfig& cfg) {
   p.d_voluntary_nspm = h.d_voluntary_nspm;
   p.motor_noise_n = h.motor_noise_n;
   p.motor_noise_tau_s = h.motor_noise_tau_s;
-  p.sample_rate_hz = cfg.loop.sample_rate_hz * cfg.sim.substeps;  // advance() runs once per substep
+  p.sample_rate_hz = law.session.sample_rate_hz * sim.substeps;  // advance() runs once per substep
   return std::make_unique<sim::LinearImpedanceHuman>(p);
 }
 
-SimBackend::SimBackend(const control::RtConfig& cfg, std::unique_ptr<sim::HumanModel> human)
-    : cfg_(cfg),
+SimBackend::SimBackend(const control::ControlConfig& law, const SimConfig& sim,
+                       std::unique_ptr<sim::HumanModel> human)
+    : start_target_shoulder_m_(law.protocol.start_shoulder_m),
+      m_handle_kg_(law.session.m_handle_kg),
+      sim_(sim),
       human_(std::move(human)),
-      frame_(cfg.frames),
-      rot_(cfg.frames.rotation()),
-      dt_(cfg.loop.dt_s()),
-      substeps_(cfg.sim.substeps),
-      m_stage_handle_(cfg.sim.stage_mass_kg + cfg.handle_mass_kg),
-      rng_(cfg.sim.seed),
-      noise_rng_(cfg.sim.seed ^ 0xF0E1D2C3B4A59687ULL) {}
+      frame_(law.session.frame),
+      rot_(law.session.frame.rotation()),
+      dt_(law.dt_s()),
+      substeps_(sim.substeps),
+      m_stage_handle_(sim.stage_mass_kg + law.session.m_handle_kg),
+      rng_(sim.seed),
+      noise_rng_(sim.seed ^ 0xF0E1D2C3B4A59687ULL) {}
 
-bool SimBackend::start(std::string& /*error*/) {
+void SimBackend::on_configure() {
   // The participant starts at rest in the start target, holding still.
   sim::ReachSpec hold;
-  hold.start_shoulder_m = cfg_.protocol.start_shoulder_m;
-  hold.goal_shoulder_m = cfg_.protocol.start_shoulder_m;
+  hold.start_shoulder_m = start_target_shoulder_m_;
+  hold.goal_shoulder_m = start_target_shoulder_m_;
   hold.t_start_s = 0.0;
   hold.duration_s = 1.0;
   hold.lateral_bow_m = 0.0;
   human_->begin_trial(hold, rng_.next());
-  planned_target_ = cfg_.protocol.start_shoulder_m;
+  planned_target_ = start_target_shoulder_m_;
   heading_to_goal_ = false;
   planned_trial_ = -1;
   started_ = true;
@@ -66,10 +69,9 @@ bool SimBackend::start(std::string& /*error*/) {
   enabled_ = false;
   f_cmd_.setZero();
   t_ = 0.0;
-  return true;
 }
 
-void SimBackend::stop() noexcept {
+void SimBackend::on_disable() noexcept {
   enabled_ = false;
   f_cmd_.setZero();
   f_applied_.setZero();
@@ -81,7 +83,7 @@ Vec2 SimBackend::true_velocity_workspace_mps() const {
 }
 
 void SimBackend::plan(const Vec2& to_sh, double duration_s) {
-  const auto& p = cfg_.sim.participant;
+  const auto& p = sim_.participant;
   sim::ReachSpec r;
   r.start_shoulder_m = human_->hand_position_m();
   r.goal_shoulder_m = to_sh;
@@ -95,7 +97,7 @@ void SimBackend::plan(const Vec2& to_sh, double duration_s) {
 
 void SimBackend::display(const control::DisplayCue& cue) {
   using control::Phase;
-  const auto& p = cfg_.sim.participant;
+  const auto& p = sim_.participant;
   if (cue.trial >= 0 && cue.trial != planned_trial_ && cue.phase == Phase::kReach) {
     planned_trial_ = cue.trial;
     heading_to_goal_ = true;
@@ -113,7 +115,7 @@ void SimBackend::write(const control::ActuatorCommand& cmd) {
 }
 
 void SimBackend::physics_step(double dt) {
-  const auto& s = cfg_.sim;
+  const auto& s = sim_;
   Mat2 m_x;
   Vec2 h;
   human_->endpoint_dynamics(m_x, h);
@@ -133,7 +135,7 @@ void SimBackend::physics_step(double dt) {
   const Vec2 xdd_sh = rot_ * xdd_w;
   const Vec2 u_ext_sh = m_x * xdd_sh - h;            // force of the handle on the hand
   const Vec2 f_h_w = -(rot_.transpose() * u_ext_sh);  // force of the hand on the handle
-  f_sensor_ = f_h_w - cfg_.handle_mass_kg.cwiseProduct(xdd_w);
+  f_sensor_ = f_h_w - m_handle_kg_.cwiseProduct(xdd_w);
   human_->advance(dt, xdd_sh);
   t_ += dt;
 }
@@ -145,12 +147,12 @@ void SimBackend::read(control::SensorReading& out) {
   }
   first_read_ = false;
   const Vec2 x = true_position_workspace_m();
-  const double res = cfg_.sim.encoder_resolution_m;
+  const double res = sim_.encoder_resolution_m;
   for (int i = 0; i < 2; ++i) out.x_workspace_m[i] = res > 0 ? std::round(x[i] / res) * res : x[i];
   out.xd_workspace_mps = true_velocity_workspace_mps();
   Vec2 f = f_sensor_ + inject.force_offset_n;
-  if (cfg_.sim.force_noise_n > 0)
-    f += cfg_.sim.force_noise_n * Vec2(noise_rng_.normal(), noise_rng_.normal());
+  if (sim_.force_noise_n > 0)
+    f += sim_.force_noise_n * Vec2(noise_rng_.normal(), noise_rng_.normal());
   if (inject.nan_force) f[0] = std::nan("");
   out.f_sensor_workspace_n = f;
   if (!inject.stale) ++seq_;

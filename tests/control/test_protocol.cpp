@@ -14,6 +14,7 @@
 
 using manip::Vec2;
 using namespace manip::control;
+using namespace manip::runtime;
 
 namespace {
 int deg(double rad) { return static_cast<int>(std::lround(rad * 180.0 / std::numbers::pi)); }

@@ -14,6 +14,7 @@
 
 using manip::Vec2;
 using namespace manip::control;
+using namespace manip::runtime;
 
 namespace {
 SafetyStateMachine in_mode(Mode m) {
@@ -107,13 +108,13 @@ TEST_CASE("mode machine: faults latch until reset, which returns to PAUSED once 
 
 TEST_CASE("safety monitor: each condition", "[safety]") {
   const RtConfig cfg;
-  SafetyMonitor m(cfg.safety, cfg.loop);
+  SafetyMonitor m(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz);
   FaultDetail d;
   auto r = test_support::reading(0, Vec2(0.0, 0.0));
   CHECK(m.check_inputs(r, false, false, d) == 0u);
   auto check = [&](std::uint32_t expect, const std::function<void(SensorReading&)>& mod, bool overran = false,
                    bool logger = false) {
-    SafetyMonitor mon(cfg.safety, cfg.loop);
+    SafetyMonitor mon(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz);
     FaultDetail det;
     auto rr = test_support::reading(1, Vec2(0.0, 0.0));
     mod(rr);
@@ -134,7 +135,7 @@ TEST_CASE("safety monitor: each condition", "[safety]") {
   check(0u, [](SensorReading&) {}, true);  // one overrun is tolerated
 
   // stale: the force sample unchanged for stale_cycles cycles
-  SafetyMonitor s2(cfg.safety, cfg.loop);
+  SafetyMonitor s2(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz);
   std::uint32_t f = 0;
   for (int k = 0; k < 10; ++k) {
     auto rr = test_support::reading(k, Vec2::Zero());
@@ -146,7 +147,7 @@ TEST_CASE("safety monitor: each condition", "[safety]") {
   CHECK(f == fault::kSensorStale);
 
   // overruns: 3 consecutive
-  SafetyMonitor s3(cfg.safety, cfg.loop);
+  SafetyMonitor s3(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz);
   for (int k = 0; k < 3; ++k) {
     FaultDetail dd;
     f = s3.check_inputs(test_support::reading(k, Vec2::Zero()), true, false, dd);
@@ -154,7 +155,7 @@ TEST_CASE("safety monitor: each condition", "[safety]") {
   }
   CHECK(f == fault::kOverrun);
   // overruns: 40 within one second, never 3 in a row
-  SafetyMonitor s4(cfg.safety, cfg.loop);
+  SafetyMonitor s4(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz);
   int first_fault = -1;
   for (int k = 0; k < 4000 && first_fault < 0; ++k) {
     FaultDetail dd;
@@ -162,7 +163,7 @@ TEST_CASE("safety monitor: each condition", "[safety]") {
   }
   CHECK(first_fault == 39 * 50);  // the 40th overrun
   // ... but 40 spread over more than a second are fine
-  SafetyMonitor s5(cfg.safety, cfg.loop);
+  SafetyMonitor s5(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz);
   bool any = false;
   for (int k = 0; k < 20000; ++k) {
     FaultDetail dd;
@@ -180,7 +181,7 @@ TEST_CASE("safety monitor: each condition", "[safety]") {
 
 TEST_CASE("safety monitor: virtual walls and safe laws", "[safety]") {
   RtConfig cfg;
-  SafetyMonitor m(cfg.safety, cfg.loop);
+  SafetyMonitor m(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz);
   CHECK(m.wall_force(Vec2(0.1, -0.1), Vec2(1.0, 1.0)).norm() == 0.0);
   const Vec2 w = m.wall_force(Vec2(0.14, -0.14), Vec2(0.1, -0.1));
   CHECK(w[0] == Approx(-5000.0 * 0.005 - 100.0 * 0.1));
@@ -190,7 +191,7 @@ TEST_CASE("safety monitor: virtual walls and safe laws", "[safety]") {
   CHECK(m.safe_force(Vec2(100.0, std::nan("")))[0] == Approx(-200.0));  // clamped
   CHECK(m.safe_force(Vec2(100.0, std::nan("")))[1] == 0.0);             // NaN never reaches a drive
   cfg.safety.safe_law = SafeLaw::kZeroForce;
-  SafetyMonitor z(cfg.safety, cfg.loop);
+  SafetyMonitor z(cfg.safety, cfg.cycle, cfg.session.sample_rate_hz);
   CHECK(z.safe_force(Vec2(0.1, -0.2)).norm() == 0.0);
 }
 
@@ -209,7 +210,7 @@ struct Rig {
   explicit Rig(const RtConfig& c, bool stop_on_fault = false)
       : cfg(c),
         ctl(c, {&log, nullptr, &cmds}, ControllerOptions{false, stop_on_fault, 0, 0}),
-        x(c.frames.point_to_workspace(c.protocol.start_shoulder_m)) {}
+        x(c.session.frame.point_to_workspace(c.protocol.start_shoulder_m)) {}
   // The "plant" follows the admittance reference exactly (ideal tracking).
   const ActuatorCommand& step(const std::function<void(SensorReading&)>& mod = nullptr, bool overran = false) {
     SensorReading r = test_support::reading(k, x);
@@ -224,7 +225,7 @@ struct Rig {
     Command c;
     c.kind = kind;
     c.seq = seq;
-    REQUIRE(cmds.try_enqueue(c));
+    REQUIRE(cmds.try_push(c));
   }
 };
 
@@ -293,7 +294,7 @@ TEST_CASE("controller: perturbation beyond its limit faults in the onset window"
   RecordQueue log(1 << 20);
   Controller ctl(cfg, {&log, nullptr, nullptr}, ControllerOptions{false, false, 0, 0});
   std::int64_t k = 0;
-  const Vec2 s = cfg.frames.point_to_workspace(cfg.protocol.start_shoulder_m);
+  const Vec2 s = cfg.session.frame.point_to_workspace(cfg.protocol.start_shoulder_m);
   for (; k < 2100; ++k) ctl.step(test_support::reading(k, s), k);
   for (int i = 0; ctl.mode() == Mode::kRunning && i < 20000; ++i, ++k) {
     const Vec2 x = s + Vec2(0.0, 0.1 * i / 4000.0);

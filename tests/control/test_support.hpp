@@ -5,16 +5,17 @@
 #include <string>
 #include <vector>
 
-#include "manip/control/config.hpp"
+#include "manip/runtime/config.hpp"
 #include "manip/control/controller.hpp"
 #include "manip/control/records.hpp"
+#include "manip/runtime/spsc_queue.hpp"
 
 namespace test_support {
 
 inline std::string shipped_config_path() { return std::string(MANIP_SOURCE_DIR) + "/config/rt.yaml"; }
 
-inline manip::control::RtConfig shipped_config(const manip::control::ConfigOverrides& ov = {}) {
-  return manip::control::load_rt_config(shipped_config_path(), ov);
+inline manip::runtime::RtConfig shipped_config(const manip::runtime::ConfigOverrides& ov = {}) {
+  return manip::runtime::load_rt_config(shipped_config_path(), ov);
 }
 
 struct Drained {
@@ -24,9 +25,9 @@ struct Drained {
   std::vector<manip::control::CommandResultRecord> results;
 };
 
-inline void drain(manip::control::RecordQueue& q, Drained& d) {
+inline void drain(manip::runtime::RecordQueue& q, Drained& d) {
   manip::control::LoopRecord r;
-  while (q.try_dequeue(r)) {
+  while (q.try_pop(r)) {
     if (auto* s = std::get_if<manip::state_t>(&r)) d.states.push_back(*s);
     if (auto* e = std::get_if<manip::control::TrialEventRecord>(&r)) d.events.push_back(*e);
     if (auto* f = std::get_if<manip::control::FaultRecord>(&r)) d.faults.push_back(*f);
@@ -36,7 +37,7 @@ inline void drain(manip::control::RecordQueue& q, Drained& d) {
 
 // Scripted readings do not follow the admittance reference: switch off the
 // output checks that compare the two (tracking error, motor force).
-inline manip::control::ConfigOverrides scripted(manip::control::ConfigOverrides ov) {
+inline manip::runtime::ConfigOverrides scripted(manip::runtime::ConfigOverrides ov) {
   ov.emplace_back("safety.max_tracking_error_m", "10.0");
   ov.emplace_back("safety.max_motor_force_n", "1.0e12");
   return ov;

@@ -12,6 +12,7 @@
 
 using manip::Vec2;
 using namespace manip::control;
+using namespace manip::runtime;
 
 TEST_CASE("trigger fires in the first crossing cycle, towards the goal, once", "[trigger]") {
   PerturbationTrigger t(0.40, 4000.0);
@@ -79,8 +80,8 @@ struct Scripted {
   test_support::Drained out;
   explicit Scripted(const RtConfig& c) : cfg(c), ctl(c, {&log, nullptr, nullptr}, ControllerOptions{false, false, 0, 0}) {}
   void step_shoulder(std::int64_t k, const Vec2& x_sh, const Vec2& xd_sh) {
-    const Vec2 xw = cfg.frames.point_to_workspace(x_sh);
-    const Vec2 vw = cfg.frames.vector_to_workspace(xd_sh);
+    const Vec2 xw = cfg.session.frame.point_to_workspace(x_sh);
+    const Vec2 vw = cfg.session.frame.vector_to_workspace(xd_sh);
     ctl.step(test_support::reading(k, xw, vw), k);
     if ((k & 1023) == 0) test_support::drain(log, out);
   }
@@ -91,7 +92,7 @@ struct Scripted {
 // the first cycle at which x2 >= trigger (the expected onset).
 std::int64_t run_reach(Scripted& s, std::int64_t& k, double speed, std::int64_t rest_cycles) {
   const Vec2 start = s.cfg.protocol.start_shoulder_m, goal = s.cfg.protocol.goal_shoulder_m;
-  const double dt = s.cfg.loop.dt_s();
+  const double dt = s.cfg.dt_s();
   std::int64_t crossing = -1;
   const std::int64_t k_end_rest = k + rest_cycles;
   for (; k < k_end_rest; ++k) s.step_shoulder(k, start, Vec2::Zero());
@@ -99,7 +100,7 @@ std::int64_t run_reach(Scripted& s, std::int64_t& k, double speed, std::int64_t 
   for (;; ++k) {
     const double x2 = start.y() + speed * static_cast<double>(k - k0) * dt;
     if (x2 >= goal.y()) break;
-    if (crossing < 0 && x2 >= s.cfg.perturbation.trigger_x2_shoulder_m) crossing = k;
+    if (crossing < 0 && x2 >= s.cfg.session.perturbation.trigger_x2_shoulder_m) crossing = k;
     s.step_shoulder(k, Vec2(0.0, x2), Vec2(0.0, speed));
   }
   const std::int64_t k_goal = k + rest_cycles;
@@ -136,7 +137,7 @@ TEST_CASE("controller: onset = first crossing cycle on a perturbed trial, logged
   // u_pert in every state: eq. 23 at (k - k0)/fs, rotated into the workspace frame (identity here)
   const manip::PerturbationProfile prof{0.15, 15.0};
   for (const auto& st : s.out.states) {
-    const Vec2 e = cfg.frames.vector_to_workspace(prof.force_n(static_cast<double>(st.cycle - crossing) / 4000.0,
+    const Vec2 e = cfg.session.frame.vector_to_workspace(prof.force_n(static_cast<double>(st.cycle - crossing) / 4000.0,
                                                                onset->pert_angle_rad));
     REQUIRE(st.u_pert_workspace_n[0] == Approx(e[0]).margin(1e-12));
     REQUIRE(st.u_pert_workspace_n[1] == Approx(e[1]).margin(1e-12));

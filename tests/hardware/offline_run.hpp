@@ -3,10 +3,10 @@
 // old file), no LCM bus, nothing on stdout.
 #include <string>
 
-#include "manip/hardware/runner.hpp"
+#include "manip/runtime/session.hpp"
 
-inline manip::hardware::RunOptions offline_run_options(const std::string& log_path) {
-  manip::hardware::RunOptions opt;
+inline manip::runtime::RunOptions offline_run_options(const std::string& log_path) {
+  manip::runtime::RunOptions opt;
   opt.log_path = log_path;
   opt.overwrite_log = true;
   opt.lcm_url = "none";

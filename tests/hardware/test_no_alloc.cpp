@@ -1,91 +1,38 @@
-// Proof that the real-time loop never allocates after start-up: a counting
-// global operator new/delete (this file replaces them for the whole
-// test_hardware binary; counting is enabled only on the calling thread, only
-// around the loop's cycles), over a simulated session driven cycle by cycle:
+// Proof that the real-time loop never allocates after start-up: the suite's
+// allocation counter (tests/support/alloc_counter.hpp, GlobalAllocScope: any
+// thread, only around the loop's cycles), over a simulated session driven
+// cycle by cycle:
 // backend read -> Controller::step -> backend write/display, with commands,
 // perturbed trials, a fault and the orderly stop.
 #include <catch2/catch.hpp>
 
 #include "sanitized.hpp"
 
-#include <atomic>
-#include <cstdlib>
-#include <new>
+#include "alloc_counter.hpp"
 
 #include "manip/command_t.hpp"
-#include "manip/control/config.hpp"
+#include "manip/runtime/config.hpp"
 #include "manip/control/controller.hpp"
-#include "manip/hardware/runner.hpp"
+#include "manip/runtime/session.hpp"
+#include "manip/runtime/spsc_queue.hpp"
 #include "manip/hardware/sim_backend.hpp"
 #include "manip/trial_event_t.hpp"
 
-namespace {
-thread_local bool g_counting = false;
-std::atomic<long> g_news{0};
-std::atomic<long> g_deletes{0};
-
-void* counted_alloc(std::size_t n) {
-  if (g_counting) g_news.fetch_add(1, std::memory_order_relaxed);
-  void* p = std::malloc(n ? n : 1);
-  if (!p) throw std::bad_alloc();
-  return p;
-}
-void* counted_alloc_aligned(std::size_t n, std::align_val_t al) {
-  if (g_counting) g_news.fetch_add(1, std::memory_order_relaxed);
-  const auto a = static_cast<std::size_t>(al);
-  void* p = std::aligned_alloc(a, (n + a - 1) / a * a);
-  if (!p) throw std::bad_alloc();
-  return p;
-}
-void counted_free(void* p) {
-  if (p && g_counting) g_deletes.fetch_add(1, std::memory_order_relaxed);
-  std::free(p);
-}
-
-struct CountScope {
-  CountScope() { g_counting = true; }
-  ~CountScope() { g_counting = false; }
-};
-}  // namespace
-
-void* operator new(std::size_t n) { return counted_alloc(n); }
-void* operator new[](std::size_t n) { return counted_alloc(n); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return counted_alloc(n);
-  } catch (...) {
-    return nullptr;
-  }
-}
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return counted_alloc(n);
-  } catch (...) {
-    return nullptr;
-  }
-}
-void* operator new(std::size_t n, std::align_val_t a) { return counted_alloc_aligned(n, a); }
-void* operator new[](std::size_t n, std::align_val_t a) { return counted_alloc_aligned(n, a); }
-void operator delete(void* p) noexcept { counted_free(p); }
-void operator delete[](void* p) noexcept { counted_free(p); }
-void operator delete(void* p, std::size_t) noexcept { counted_free(p); }
-void operator delete[](void* p, std::size_t) noexcept { counted_free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { counted_free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { counted_free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { counted_free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { counted_free(p); }
-
 using namespace manip::control;
+using namespace manip::runtime;
 using manip::Vec2;
 
-TEST_CASE("the counting allocator counts (self-test)", "[no_alloc]") {
-  const long before = g_news.load();
+TEST_CASE("the allocation counter is linked into this binary and counts", "[no_alloc]") {
+  manip::test::AllocCounts got;
   {
-    CountScope c;
+    const manip::test::GlobalAllocScope c;
     auto* p = new int(3);
+    asm volatile("" : : "r"(p) : "memory");  // the pointer escapes: new/delete cannot be elided
     delete p;
+    got = c.counts();  // read before Catch's own allocations in CHECK
   }
-  CHECK(g_news.load() - before == 1);
+  CHECK(got.news == 1);
+  CHECK(got.deletes == 1);
 }
 
 TEST_CASE("zero allocations in the loop over a simulated session, cycle by cycle", "[no_alloc][session]") {
@@ -100,17 +47,17 @@ TEST_CASE("zero allocations in the loop over a simulated session, cycle by cycle
   RecordQueue log(cfg.loop.log_queue_capacity), bus(cfg.loop.bus_queue_capacity);
   CommandQueue cmds(cfg.loop.command_queue_capacity);
   Controller ctl(cfg, {&log, &bus, &cmds}, ControllerOptions{true, false, 0, 1'700'000'000'000'000});
-  manip::hardware::SimBackend sim(cfg, manip::hardware::make_sim_human(cfg));
-  std::string err;
-  REQUIRE(sim.start(err));
-  manip::hardware::RtCycle cycle(sim, ctl);
+  manip::hardware::SimBackend sim(cfg, cfg.sim, manip::hardware::make_sim_human(cfg, cfg.sim));
+  sim.configure();
+  sim.enable();
+  RtCycle cycle(sim, ctl);
 
-  const long news0 = g_news.load(), deletes0 = g_deletes.load();
+  long news = 0, deletes = 0;
   std::int64_t k = 0;
   long states = 0, onsets = 0, ends = 0, faults = 0, results = 0;
   auto drain = [&] {  // the consumers (logger/bus threads), outside the counted region
     LoopRecord r;
-    while (log.try_dequeue(r)) {
+    while (log.try_pop(r)) {
       if (std::holds_alternative<manip::state_t>(r)) ++states;
       if (auto* e = std::get_if<TrialEventRecord>(&r)) {
         onsets += e->kind == manip::trial_event_t::ONSET;
@@ -119,7 +66,7 @@ TEST_CASE("zero allocations in the loop over a simulated session, cycle by cycle
       faults += std::holds_alternative<FaultRecord>(r);
       results += std::holds_alternative<CommandResultRecord>(r);
     }
-    while (bus.try_dequeue(r)) {
+    while (bus.try_pop(r)) {
     }
   };
   auto command = [&](std::int8_t kind) {
@@ -128,7 +75,7 @@ TEST_CASE("zero allocations in the loop over a simulated session, cycle by cycle
     c.seq = k;
     c.start_shoulder_m = cfg.protocol.start_shoulder_m;
     c.goal_shoulder_m = cfg.protocol.goal_shoulder_m;
-    REQUIRE(cmds.try_enqueue(c));
+    REQUIRE(cmds.try_push(c));
   };
   bool more = true, commands_sent = false, fault_injected = false;
   std::int64_t reset_at = -1;
@@ -154,12 +101,13 @@ TEST_CASE("zero allocations in the loop over a simulated session, cycle by cycle
     }
     if (ctl.mode() == Mode::kPaused) command(manip::command_t::RESUME);
     {
-      CountScope counting;
+      const manip::test::GlobalAllocScope counting;
       for (int i = 0; i < 256 && more; ++i, ++k) more = cycle.run_cycle(k, false);
+      news += counting.counts().news;
+      deletes += counting.counts().deletes;
     }
     drain();
   }
-  const long news = g_news.load() - news0, deletes = g_deletes.load() - deletes0;
   INFO("cycles " << k << ", states " << states);
   CHECK(news == 0);
   CHECK(deletes == 0);

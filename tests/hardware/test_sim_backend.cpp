@@ -6,9 +6,9 @@
 #include <cstdio>
 
 #include "manip/common/perturbation.hpp"
-#include "manip/control/config.hpp"
+#include "manip/runtime/config.hpp"
 #include "manip/control/controller.hpp"
-#include "manip/hardware/runner.hpp"
+#include "manip/runtime/spsc_queue.hpp"
 #include "manip/hardware/sim_backend.hpp"
 #include "manip/sim/ideal_admittance.hpp"
 #include "manip/sim/linear_human.hpp"
@@ -17,6 +17,7 @@
 using manip::Mat2;
 using manip::Vec2;
 using namespace manip::control;
+using namespace manip::runtime;
 namespace hw = manip::hardware;
 
 namespace {
@@ -63,9 +64,9 @@ RtConfig no_friction() {
 TEST_CASE("sim plant: rigid coupling, sensor force and zero-order hold", "[sim_backend]") {
   const RtConfig cfg = no_friction();
   auto human = std::make_unique<MassHuman>(2.0);
-  hw::SimBackend sim(cfg, std::move(human));
-  std::string err;
-  REQUIRE(sim.start(err));
+  hw::SimBackend sim(cfg, cfg.sim, std::move(human));
+  sim.configure();
+  sim.enable();
   SensorReading r;
   sim.read(r);  // t = 0, at rest in the start target
   CHECK(r.x_workspace_m[1] == Approx(0.30 - 0.425));
@@ -76,10 +77,10 @@ TEST_CASE("sim plant: rigid coupling, sensor force and zero-order hold", "[sim_b
   for (int k = 0; k < 400; ++k) sim.read(r);  // 0.1 s with the force held
   // (m_s + m_h + M_x) a = F  per axis; the sensor sees -(M_x + m_h) a
   for (int i = 0; i < 2; ++i) {
-    const double m_tot = cfg.sim.stage_mass_kg[i] + cfg.handle_mass_kg[i] + 2.0;
+    const double m_tot = cfg.sim.stage_mass_kg[i] + cfg.session.m_handle_kg[i] + 2.0;
     const double a = c.f_motor_n[i] / m_tot;
     CHECK(r.xd_workspace_mps[i] == Approx(a * 0.1).epsilon(1e-9));
-    CHECK(r.f_sensor_workspace_n[i] == Approx(-(2.0 + cfg.handle_mass_kg[i]) * a).epsilon(1e-9));
+    CHECK(r.f_sensor_workspace_n[i] == Approx(-(2.0 + cfg.session.m_handle_kg[i]) * a).epsilon(1e-9));
   }
   // disabled drives apply no force
   c.enable = false;
@@ -94,9 +95,9 @@ TEST_CASE("sim plant: friction and encoder quantisation", "[sim_backend]") {
   RtConfig cfg;
   auto human = std::make_unique<MassHuman>(2.0);
   MassHuman* h = human.get();
-  hw::SimBackend sim(cfg, std::move(human));
-  std::string err;
-  REQUIRE(sim.start(err));
+  hw::SimBackend sim(cfg, cfg.sim, std::move(human));
+  sim.configure();
+  sim.enable();
   SensorReading r;
   sim.read(r);
   h->set_velocity(Vec2(0.05, 0.0));
@@ -108,9 +109,9 @@ TEST_CASE("sim plant: friction and encoder quantisation", "[sim_backend]") {
 
 TEST_CASE("sim backend: fault injection reaches the reading", "[sim_backend]") {
   RtConfig cfg;
-  hw::SimBackend sim(cfg, std::make_unique<MassHuman>(2.0));
-  std::string err;
-  REQUIRE(sim.start(err));
+  hw::SimBackend sim(cfg, cfg.sim, std::make_unique<MassHuman>(2.0));
+  sim.configure();
+  sim.enable();
   SensorReading r;
   sim.read(r);
   const auto seq = r.force_seq;
@@ -133,12 +134,12 @@ TEST_CASE("rendering error: controller + sim stages vs the ideal admittance, sam
   // perturbation causes (perturbed - unperturbed, each on its own plant).
   RtConfig cfg = load_rt_config(std::string(MANIP_SOURCE_DIR) + "/config/rt.yaml",
                                 {{"protocol.movements", "1"}, {"protocol.perturbed_trials", "1"}});
-  const double fs = cfg.loop.sample_rate_hz, dt = 1.0 / fs;
+  const double fs = cfg.session.sample_rate_hz, dt = 1.0 / fs;
   // The protocol takes the angle from the schedule: use the same one in (a).
   double angle = 0.0;
   for (const auto& t : make_schedule(cfg.protocol, cfg.perturbation, 1))
     if (t.perturbed) angle = t.angle_rad;
-  const manip::PerturbationProfile prof{cfg.perturbation.duration_s, cfg.perturbation.amplitude_n};
+  const manip::PerturbationProfile prof{cfg.session.perturbation.duration_s, cfg.session.perturbation.amplitude_n};
   manip::sim::ReachSpec reach;
   reach.start_shoulder_m = cfg.protocol.start_shoulder_m;
   reach.goal_shoulder_m = cfg.protocol.goal_shoulder_m;
@@ -148,12 +149,12 @@ TEST_CASE("rendering error: controller + sim stages vs the ideal admittance, sam
 
   // (a) ideal admittance (shoulder frame; admittance diagonal so frame-invariant)
   auto ideal = [&](bool perturb, std::vector<Vec2>& x) {
-    auto h = hw::make_sim_human(cfg);  // sample rate = fs * substeps
+    auto h = hw::make_sim_human(cfg, cfg.sim);  // sample rate = fs * substeps
     h->begin_trial(reach, 99);
     manip::sim::AdmittanceParams ap;
-    ap.m_adm_kg = cfg.admittance.m_adm_kg.asDiagonal();
-    ap.d_adm_nspm = cfg.admittance.d_adm_nspm.asDiagonal();
-    ap.m_handle_kg = cfg.handle_mass_kg.asDiagonal();
+    ap.m_adm_kg = cfg.session.m_adm_kg.asDiagonal();
+    ap.d_adm_nspm = cfg.session.d_adm_nspm.asDiagonal();
+    ap.m_handle_kg = cfg.session.m_handle_kg.asDiagonal();
     std::int64_t onset = -1;
     double prev = h->hand_position_m().y();
     for (int k = 0; k < n; ++k) {
@@ -173,9 +174,9 @@ TEST_CASE("rendering error: controller + sim stages vs the ideal admittance, sam
     c.protocol.start_hold_s = 0.0;  // START in the first cycle
     RecordQueue log(1 << 16);
     Controller ctl(c, {&log, nullptr, nullptr}, ControllerOptions{false, false, 0, 0});
-    hw::SimBackend sim(c, hw::make_sim_human(c));
-    std::string err;
-    REQUIRE(sim.start(err));
+    hw::SimBackend sim(c, c.sim, hw::make_sim_human(c, c.sim));
+    sim.configure();
+    sim.enable();
     sim.human().begin_trial(reach, 99);  // the same plan as (a), without the participant's random reaction
     SensorReading r;
     std::int64_t onset = -1;
@@ -185,7 +186,7 @@ TEST_CASE("rendering error: controller + sim stages vs the ideal admittance, sam
       const ActuatorCommand& cmd = ctl.step(r, k);
       if (cmd.send) sim.write(cmd);  // no display(): the plan above is the person's
       LoopRecord rec;
-      while (log.try_dequeue(rec))
+      while (log.try_pop(rec))
         if (auto* e = std::get_if<TrialEventRecord>(&rec))
           if (e->kind == manip::trial_event_t::ONSET) onset = e->cycle;
     }

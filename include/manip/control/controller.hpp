@@ -25,9 +25,9 @@
 namespace manip::control {
 
 struct ControllerQueues {
-  RecordQueue* log{nullptr};        // every state + every event (logger thread)
-  RecordQueue* bus{nullptr};        // decimated states + every event (publisher thread)
-  CommandQueue* commands{nullptr};  // validated commands (bus thread)
+  RecordSink* log{nullptr};          // every state + every event (logger thread)
+  RecordSink* bus{nullptr};          // decimated states + every event (publisher thread)
+  CommandSource* commands{nullptr};  // validated commands (bus thread)
 };
 
 struct ControllerOptions {
@@ -54,7 +54,7 @@ struct ControllerStatus {
 
 class Controller {
  public:
-  Controller(const RtConfig& cfg, ControllerQueues queues, const ControllerOptions& opt = {});
+  Controller(const ControlConfig& cfg, ControllerQueues queues, const ControllerOptions& opt = {});
 
   // One cycle. `overran`: the previous cycle missed its deadline (from the
   // thread wrapper; false in as-fast-as-possible runs).
@@ -75,7 +75,7 @@ class Controller {
   [[nodiscard]] std::uint32_t present_conditions() const { return present_; }
   [[nodiscard]] const ProtocolEvents& events() const { return events_; }  // this cycle's trial events
   [[nodiscard]] std::int64_t utime_of(std::int64_t cycle) const { return opt_.utime_start_us + cycle * period_us_; }
-  [[nodiscard]] const RtConfig& config() const { return cfg_; }
+  [[nodiscard]] const ControlConfig& config() const { return cfg_; }
 
  private:
   void handle_command(const Command& c, const SensorReading& in);
@@ -83,7 +83,7 @@ class Controller {
   void enter_stopped(StopReason why);
   void push_record(const LoopRecord& r, bool to_bus);
 
-  RtConfig cfg_;
+  ControlConfig cfg_;
   ControllerQueues q_;
   ControllerOptions opt_;
   std::int64_t period_us_;

@@ -55,7 +55,7 @@ struct ProtocolEvents {
 
 class Protocol {
  public:
-  Protocol(const RtConfig& cfg);
+  explicit Protocol(const ControlConfig& cfg);
 
   // Session starts (or resumes): phase RETURN.
   void begin();

@@ -1,14 +1,12 @@
 #pragma once
 // What goes in and out of the 4 kHz loop. Everything here is trivially
-// copyable and fixed-size: the loop copies these into preallocated lock-free
-// single-producer/single-consumer queues (moodycamel::ReaderWriterQueue,
-// try_enqueue/try_dequeue only, which never allocate), so the loop never
-// allocates, locks or does I/O. The non-real-time threads turn them into LCM
-// messages (strings are built there, from the codes).
+// copyable and fixed-size: the loop hands these to the Outbox/Inbox interfaces
+// below, which the runtime implements with preallocated lock-free
+// single-producer/single-consumer queues (runtime/spsc_queue.hpp), so the loop
+// never allocates, locks or does I/O. The non-real-time threads turn them into
+// LCM messages (strings are built there, from the codes).
 #include <cstdint>
 #include <variant>
-
-#include <readerwriterqueue/readerwriterqueue.h>
 
 #include "manip/common/types.hpp"
 #include "manip/schema/codes.hpp"
@@ -89,7 +87,21 @@ struct CommandResultRecord {
 };
 
 using LoopRecord = std::variant<manip::state_t, TrialEventRecord, FaultRecord, CommandResultRecord>;
-using RecordQueue = moodycamel::ReaderWriterQueue<LoopRecord>;
-using CommandQueue = moodycamel::ReaderWriterQueue<Command>;
+// The loop's side of a bounded queue: never blocks, never allocates; false
+// when full (the caller counts the drop) or empty.
+template <class T>
+class Outbox {
+ public:
+  virtual ~Outbox() = default;
+  virtual bool try_push(const T& v) noexcept = 0;
+};
+template <class T>
+class Inbox {
+ public:
+  virtual ~Inbox() = default;
+  virtual bool try_pop(T& out) noexcept = 0;
+};
+using RecordSink = Outbox<LoopRecord>;
+using CommandSource = Inbox<Command>;
 
 }  // namespace manip::control

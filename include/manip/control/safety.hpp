@@ -33,7 +33,7 @@ struct FaultDetail {
 
 class SafetyMonitor {
  public:
-  SafetyMonitor(const SafetyConfig& s, const LoopConfig& l);
+  SafetyMonitor(const SafetyConfig& s, const CycleConfig& c, double sample_rate_hz);
 
   // Conditions present in this cycle's reading and timing (no latching here).
   std::uint32_t check_inputs(const SensorReading& in, bool overran, bool logger_failed, FaultDetail& d);

@@ -1,58 +1,73 @@
 #pragma once
 // The hardware-interface boundary: every backend (simulation, CANopen drives)
 // looks the same to the controller, so the controller code is identical for
-// all of them. Per cycle, in this order (RtCycle does it):
+// all of them. Per cycle, in this order (runtime::RtCycle does it):
 //   read(reading)  -> Controller::step(reading, cycle) -> write(command) if command.send
 //   display(cue)   (what the lab's visual feedback shows; only simulations use it)
 // read/write/display run in the real-time thread: they must not allocate,
-// lock or block beyond the backend's own bus I/O. start/stop are the
-// non-real-time lifecycle.
-#include <memory>
+// lock or block beyond the backend's own bus I/O.
+//
+// Lifecycle (ros2_control's hardware-interface states, libfranka's split of
+// connecting from commanding): a CiA 402 drive must be opened and checked
+// (slow, may fail) long before it is switched on, and switched off before the
+// bus is closed:
+//   Unconfigured --configure()--> Inactive --enable()--> Active
+//   Active --disable()--> Inactive;   any --shutdown()--> Finalized
+// configure(): open, check, everything that can fail slowly; drives stay
+//   disabled. enable(): switch on; afterwards read/write are real-time safe.
+// disable() and shutdown() never throw and are idempotent; shutdown() runs on
+// every exit path (it disables first when Active). A call out of order is
+// refused with BackendStateError and changes nothing.
 #include <string>
 
-#include "manip/control/config.hpp"
+#include "manip/common/errors.hpp"
 #include "manip/control/records.hpp"
 
 namespace manip::hardware {
+
+enum class BackendState { kUnconfigured, kInactive, kActive, kFinalized };
+const char* state_name(BackendState s);
+
+// A lifecycle call in the wrong state: a programming error of the caller.
+struct BackendStateError : Error {
+  explicit BackendStateError(const std::string& what) : Error(exit_code::kInternal, what) {}
+};
+// configure()/enable() failed (drive not found, bus down, bad parameters).
+struct BackendError : Error {
+  explicit BackendError(const std::string& what) : Error(exit_code::kBackend, what) {}
+};
 
 class Backend {
  public:
   virtual ~Backend() = default;
   [[nodiscard]] virtual std::string name() const = 0;
-  // Configure and enable; after a successful start read/write are real-time safe.
-  virtual bool start(std::string& error) = 0;
-  // Zero force and disable the drives. Idempotent; called on every exit path.
-  virtual void stop() noexcept = 0;
+
+  // Throw BackendError on failure (the state is then unchanged).
+  void configure();
+  void enable();
+  // Zero force and disable the drives (Active -> Inactive); no-op otherwise.
+  void disable() noexcept;
+  // Release everything; idempotent, valid in every state.
+  void shutdown() noexcept;
+  [[nodiscard]] BackendState state() const { return state_; }
+
   // Paced in real time by the caller, or free-running (simulations only).
   [[nodiscard]] virtual bool supports_as_fast_as_possible() const { return false; }
 
+  // Active only (not checked: real-time path).
   virtual void read(control::SensorReading& out) = 0;
   virtual void write(const control::ActuatorCommand& cmd) = 0;
   virtual void display(const control::DisplayCue& /*cue*/) {}
+
+ protected:
+  virtual void on_configure() = 0;
+  virtual void on_enable() = 0;
+  virtual void on_disable() noexcept = 0;
+  virtual void on_shutdown() noexcept {}
+
+ private:
+  void require(BackendState s, const char* call) const;
+  BackendState state_{BackendState::kUnconfigured};
 };
-
-// Exit codes of manip_rt (documented in --help and docs/controller.md).
-namespace exit_code {
-inline constexpr int kOk = 0;                 // session complete / stopped / duration reached
-inline constexpr int kError = 1;              // unexpected internal error
-inline constexpr int kUsage = 2;              // bad command line
-inline constexpr int kConfig = 3;             // configuration invalid or unreadable
-inline constexpr int kBackendUnavailable = 4; // backend not available (e.g. `can` before its issue) or failed to start
-inline constexpr int kRealtime = 5;           // --require-rt and no PREEMPT_RT kernel / no real-time privileges
-inline constexpr int kLog = 6;                // log file cannot be created, exists, or writing failed (disk full)
-inline constexpr int kFault = 7;              // session ended by a safety fault (unattended run, --exit-on-fault)
-inline constexpr int kBus = 8;                // LCM bus cannot be created with the given URL
-inline constexpr int kInterrupted = 130;      // SIGINT/SIGTERM: stopped safely, log closed
-}  // namespace exit_code
-
-struct BackendResult {
-  std::unique_ptr<Backend> backend;
-  int exit_code{exit_code::kOk};
-  std::string error;
-};
-
-// "sim" -> SimBackend with the configured simulated person; "can" -> refused
-// (exit_code::kBackendUnavailable) until the CANopen issue lands.
-BackendResult make_backend(const std::string& name, const control::RtConfig& cfg);
 
 }  // namespace manip::hardware

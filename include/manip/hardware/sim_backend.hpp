@@ -2,8 +2,8 @@
 // Simulation backend: the two stages as masses with viscous + Coulomb friction,
 // driven by the motor force the controller sends (held between drive ticks:
 // zero-order hold at the drive rate), with a simulated person rigidly holding
-// the handle (any sim::HumanModel: the linear-impedance arm now, the
-// neuromechanical arm later).
+// the handle (any sim::HumanModel: the linear-impedance arm or the
+// neuromechanical two-link arm, selected by sim.human.model).
 //
 // Plant (workspace axes; R = workspace->shoulder rotation; m_s stage moving
 // mass per axis (axis 1 carries axis 2), m_h handle mass above the sensor):
@@ -26,23 +26,26 @@
 #include <memory>
 
 #include "manip/common/frames.hpp"
-#include "manip/control/config.hpp"
 #include "manip/common/rng.hpp"
+#include "manip/control/config.hpp"
 #include "manip/hardware/backend.hpp"
+#include "manip/hardware/sim_backend_config.hpp"
 #include "manip/sim/human.hpp"
 
 namespace manip::hardware {
 
-// The simulated person selected by sim.human (sample rate = loop rate x substeps).
-std::unique_ptr<sim::HumanModel> make_sim_human(const control::RtConfig& cfg);
+// The simulated person selected by sim.human (sample rate = loop rate x
+// substeps). The only place the sim backend builds a human model: switch it to
+// sim's human factory here. Throws ConfigError on bad parameters.
+std::unique_ptr<sim::HumanModel> make_sim_human(const control::ControlConfig& law, const SimConfig& sim);
 
 class SimBackend final : public Backend {
  public:
-  SimBackend(const control::RtConfig& cfg, std::unique_ptr<sim::HumanModel> human);
+  // law: the session (rates, frame, handle mass) and the start target where the
+  // simulated participant waits; sim: rt.yaml's `sim:` section.
+  SimBackend(const control::ControlConfig& law, const SimConfig& sim, std::unique_ptr<sim::HumanModel> human);
 
   [[nodiscard]] std::string name() const override { return "sim"; }
-  bool start(std::string& error) override;
-  void stop() noexcept override;
   [[nodiscard]] bool supports_as_fast_as_possible() const override { return true; }
   void read(control::SensorReading& out) override;
   void write(const control::ActuatorCommand& cmd) override;
@@ -69,10 +72,15 @@ class SimBackend final : public Backend {
   [[nodiscard]] bool enabled() const { return enabled_; }
 
  private:
+  void on_configure() override;
+  void on_enable() override {}
+  void on_disable() noexcept override;
   void physics_step(double dt);
   void plan(const Vec2& to_sh, double duration_s);
 
-  control::RtConfig cfg_;
+  Vec2 start_target_shoulder_m_;
+  Vec2 m_handle_kg_;
+  SimConfig sim_;
   std::unique_ptr<sim::HumanModel> human_;
   WorkspaceToShoulder frame_;
   Mat2 rot_;

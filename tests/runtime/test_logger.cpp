@@ -8,15 +8,17 @@
 #include <thread>
 
 #include "manip/common/channels.hpp"
-#include "manip/control/logger.hpp"
-#include "manip/control/messages.hpp"
+#include "manip/runtime/logger.hpp"
+#include "manip/runtime/session.hpp"
+#include "manip/runtime/messages.hpp"
 #include "manip/fault_t.hpp"
 #include "manip/logging/event_log.hpp"
 #include "manip/session_t.hpp"
 #include "manip/state_t.hpp"
-#include "test_support.hpp"
+#include "../control/test_support.hpp"
 
 using namespace manip::control;
+using namespace manip::runtime;
 
 namespace {
 std::string tmp_path(const char* name) {
@@ -39,16 +41,16 @@ TEST_CASE("logger: session first, every state, fault record with the last N stat
   cfg.effective_yaml = "loop: {}\n";
   RecordQueue q(1 << 14);
   Logger lg(q, 100, 0.1);
-  const auto session = make_session_message(cfg, "manip_rt/test", 1000);
+  const auto session = manip::schema::to_message(session_of_run(cfg, "manip_rt/test", 1000));
   std::string err;
   REQUIRE(lg.open(path, session, err));
   std::atomic<bool> stop{false};
   std::thread th([&] { lg.run(stop); });
   for (std::int64_t c = 0; c < 5000; ++c) {
-    while (!q.try_enqueue(LoopRecord(state(c)))) std::this_thread::yield();
+    while (!q.try_push(LoopRecord(state(c)))) std::this_thread::yield();
     if (c == 4321) {
       FaultRecord f{state(c).utime, c, fault::kVelocity, fault::kVelocity, Mode::kFault, 1, 1.5, 1.0};
-      while (!q.try_enqueue(LoopRecord(f))) std::this_thread::yield();
+      while (!q.try_push(LoopRecord(f))) std::this_thread::yield();
     }
   }
   stop = true;
@@ -111,10 +113,10 @@ TEST_CASE("logger: a full disk is reported loudly and sets the failure flag", "[
   RtConfig cfg;
   std::string err;
   // The session message may still fit in the stdio buffer: open can succeed.
-  const bool opened = lg.open("/dev/full", make_session_message(cfg, "t", 0), err);
+  const bool opened = lg.open("/dev/full", manip::schema::to_message(session_of_run(cfg, "t", 0)), err);
   if (opened) {
     for (std::int64_t c = 0; c < 20000 && !lg.failed(); ++c) {
-      REQUIRE(q.try_enqueue(LoopRecord(state(c))));
+      REQUIRE(q.try_push(LoopRecord(state(c))));
       if (c % 1000 == 999) lg.drain();
     }
     lg.drain();

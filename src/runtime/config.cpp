@@ -1,188 +1,18 @@
-#include "manip/control/config.hpp"
+#include "manip/runtime/config.hpp"
 
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
-#include <fstream>
-#include <functional>
-#include <set>
 #include <sstream>
 
-namespace manip::control {
+#include "manip/common/yaml_reader.hpp"
+#include "manip/version.hpp"
+
+namespace manip::runtime {
 namespace {
 
-std::string scalar_text(const YAML::Node& n) {
-  if (n.IsScalar()) return n.Scalar();
-  std::ostringstream os;
-  os << n;
-  std::string s = os.str();
-  for (auto& c : s)
-    if (c == '\n') c = ' ';
-  return s;
-}
-
-// Strict reader of one mapping: every access marks a key as known; finish()
-// rejects the keys that were never asked for.
-class Section {
- public:
-  Section(const std::string& file, const YAML::Node& node, std::string path)
-      : file_(file), node_(node), path_(std::move(path)) {
-    if (!node_.IsMap()) fail_node(node_, path_.empty() ? "(top level)" : path_, "must be a mapping of keys");
-  }
-
-  [[noreturn]] void fail_node(const YAML::Node& n, const std::string& key, const std::string& why) const {
-    std::ostringstream os;
-    os << file_;
-    if (n.IsDefined() && n.Mark().line >= 0) os << ':' << n.Mark().line + 1;
-    os << ": " << key << ": " << why;
-    throw ConfigError(os.str());
-  }
-  [[noreturn]] void fail(const std::string& key, const std::string& why) const {
-    const YAML::Node n = node_[key];
-    if (n.IsDefined()) fail_node(n, full(key), why);
-    fail_node(node_, full(key), why);
-  }
-
-  std::string full(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
-
-  YAML::Node get(const std::string& key, bool required = true) {
-    known_.insert(key);
-    YAML::Node n = node_[key];
-    if (!n.IsDefined() || n.IsNull()) {
-      if (required) fail_node(node_, full(key), "missing (required key)");
-      return YAML::Node();
-    }
-    return n;
-  }
-
-  bool has(const std::string& key) {
-    known_.insert(key);
-    const YAML::Node n = node_[key];
-    return n.IsDefined() && !n.IsNull();
-  }
-
-  Section sub(const std::string& key) { return Section(file_, get(key), full(key)); }
-
-  double number(const std::string& key, const std::function<bool(double)>& ok, const char* rule) {
-    const YAML::Node n = get(key);
-    double v{};
-    if (!n.IsScalar() || !YAML::convert<double>::decode(n, v) || !std::isfinite(v))
-      fail_node(n, full(key), "expected a finite number, got '" + scalar_text(n) + "'");
-    if (!ok(v)) fail_node(n, full(key), std::string(rule) + " (got " + scalar_text(n) + ")");
-    return v;
-  }
-  double positive(const std::string& key) {
-    return number(key, [](double v) { return v > 0; }, "must be > 0");
-  }
-  double nonneg(const std::string& key) {
-    return number(key, [](double v) { return v >= 0; }, "must be >= 0");
-  }
-  long long integer(const std::string& key, long long lo, long long hi) {
-    const YAML::Node n = get(key);
-    long long v{};
-    if (!n.IsScalar() || !YAML::convert<long long>::decode(n, v))
-      fail_node(n, full(key), "expected an integer, got '" + scalar_text(n) + "'");
-    if (v < lo || v > hi)
-      fail_node(n, full(key),
-                "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "] (got " + std::to_string(v) + ")");
-    return v;
-  }
-  std::uint64_t unsigned64(const std::string& key) {
-    const YAML::Node n = get(key);
-    unsigned long long v{};
-    if (!n.IsScalar() || !YAML::convert<unsigned long long>::decode(n, v) || (!n.Scalar().empty() && n.Scalar()[0] == '-'))
-      fail_node(n, full(key), "expected a non-negative integer, got '" + scalar_text(n) + "'");
-    return v;
-  }
-  bool boolean(const std::string& key) {
-    const YAML::Node n = get(key);
-    bool v{};
-    if (!n.IsScalar() || !YAML::convert<bool>::decode(n, v))
-      fail_node(n, full(key), "expected true or false, got '" + scalar_text(n) + "'");
-    return v;
-  }
-  std::string string(const std::string& key, bool allow_empty = false) {
-    const YAML::Node n = get(key);
-    if (!n.IsScalar()) fail_node(n, full(key), "expected a string");
-    if (!allow_empty && n.Scalar().empty()) fail_node(n, full(key), "must not be empty");
-    return n.Scalar();
-  }
-  std::string choice(const std::string& key, const std::vector<std::string>& allowed) {
-    const std::string v = string(key);
-    for (const auto& a : allowed)
-      if (a == v) return v;
-    std::string list;
-    for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-    fail(key, "must be one of " + list + " (got '" + v + "')");
-  }
-  std::vector<double> numbers(const std::string& key, std::size_t n_expected /*0 = any >= 1*/) {
-    const YAML::Node n = get(key);
-    if (!n.IsSequence()) fail_node(n, full(key), "expected a list of numbers");
-    if (n_expected && n.size() != n_expected)
-      fail_node(n, full(key), "expected " + std::to_string(n_expected) + " numbers, got " + std::to_string(n.size()));
-    if (!n_expected && n.size() == 0) fail_node(n, full(key), "expected at least one number");
-    std::vector<double> out;
-    for (std::size_t i = 0; i < n.size(); ++i) {
-      double v{};
-      if (!n[i].IsScalar() || !YAML::convert<double>::decode(n[i], v) || !std::isfinite(v))
-        fail_node(n[i], full(key), "element " + std::to_string(i) + " is not a finite number ('" +
-                                       scalar_text(n[i]) + "')");
-      out.push_back(v);
-    }
-    return out;
-  }
-  Vec2 vec2(const std::string& key, const std::function<bool(double)>& ok = nullptr, const char* rule = "") {
-    const auto v = numbers(key, 2);
-    if (ok)
-      for (double x : v)
-        if (!ok(x)) fail(key, std::string("every element ") + rule + " (got " + scalar_text(node_[key]) + ")");
-    return Vec2(v[0], v[1]);
-  }
-  Vec2 vec2_positive(const std::string& key) {
-    return vec2(key, [](double v) { return v > 0; }, "must be > 0");
-  }
-  Vec2 vec2_nonneg(const std::string& key) {
-    return vec2(key, [](double v) { return v >= 0; }, "must be >= 0");
-  }
-  Mat2 mat2(const std::string& key) {
-    const YAML::Node n = get(key);
-    if (!n.IsSequence() || n.size() != 2 || !n[0].IsSequence() || !n[1].IsSequence() || n[0].size() != 2 ||
-        n[1].size() != 2)
-      fail_node(n, full(key), "expected a 2x2 matrix [[a, b], [c, d]] (row-major, shoulder frame)");
-    Mat2 m;
-    for (int r = 0; r < 2; ++r)
-      for (int c = 0; c < 2; ++c) {
-        double v{};
-        if (!YAML::convert<double>::decode(n[r][c], v) || !std::isfinite(v))
-          fail_node(n, full(key), "element (" + std::to_string(r) + "," + std::to_string(c) + ") is not a finite number");
-        m(r, c) = v;
-      }
-    return m;
-  }
-  Mat2 mat2_spd(const std::string& key) {
-    const Mat2 m = mat2(key);
-    const Mat2 s = 0.5 * (m + m.transpose());
-    if (!(s(0, 0) > 0 && s.determinant() > 0)) fail(key, "must be positive definite");
-    return m;
-  }
-
-  void finish() const {
-    for (auto it = node_.begin(); it != node_.end(); ++it) {
-      const std::string k = it->first.as<std::string>();
-      if (!known_.count(k)) {
-        std::string list;
-        for (const auto& a : known_) list += (list.empty() ? "" : ", ") + a;
-        fail_node(it->first, full(k), "unknown key (known keys here: " + list + ")");
-      }
-    }
-  }
-
- private:
-  const std::string& file_;
-  YAML::Node node_;
-  std::string path_;
-  std::set<std::string> known_;
-};
+using control::SafeLaw;
+using yaml::Section;
 
 void apply_override(YAML::Node root, const std::string& path, const std::string& value, const std::string& name) {
   std::vector<std::string> parts;
@@ -204,41 +34,43 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
 
   {
     auto s = top.sub("participant");
-    auto& p = c.participant;
+    auto& p = c.session;
     p.participant_id = s.string("participant_id");
     p.session_id = s.string("session_id");
     p.body_mass_kg = s.nonneg("body_mass_kg");
     p.body_height_m = s.nonneg("body_height_m");
+    auto& a = p.anthropometrics;
     const Vec2 l = s.vec2_positive("segment_length_m");
     const Vec2 m = s.vec2_positive("segment_mass_kg");
     const Vec2 com = s.vec2_positive("segment_com_m");
     const Vec2 in = s.vec2_positive("segment_inertia_kgm2");
     for (int i = 0; i < 2; ++i) {
-      p.segment_length_m[i] = l[i];
-      p.segment_mass_kg[i] = m[i];
-      p.segment_com_m[i] = com[i];
-      p.segment_inertia_kgm2[i] = in[i];
+      a.length_m[i] = l[i];
+      a.mass_kg[i] = m[i];
+      a.com_m[i] = com[i];
+      a.inertia_kgm2[i] = in[i];
       if (com[i] >= l[i]) s.fail("segment_com_m", "centre of mass must lie within the segment (com < length)");
     }
     s.finish();
   }
   {
     auto s = top.sub("frames");
-    c.frames.origin_in_shoulder_m = s.vec2("workspace_origin_in_shoulder_m");
-    c.frames.rot_rad = s.number("workspace_to_shoulder_rot_rad", [](double v) { return std::abs(v) <= 3.1416; },
+    c.session.frame.origin_in_shoulder_m = s.vec2("workspace_origin_in_shoulder_m");
+    c.session.frame.rot_rad = s.number("workspace_to_shoulder_rot_rad", [](double v) { return std::abs(v) <= 3.1416; },
                                 "must be within [-pi, pi]");
     s.finish();
   }
   {
     auto s = top.sub("loop");
     auto& l = c.loop;
-    l.sample_rate_hz = s.number("sample_rate_hz", [](double v) { return v >= 100 && v <= 20000; },
-                                "must be in [100, 20000] Hz");
-    l.drive_rate_hz = s.number("drive_rate_hz", [](double v) { return v > 0; }, "must be > 0");
-    const double dec = l.sample_rate_hz / l.drive_rate_hz;
+    auto& ses = c.session;
+    ses.sample_rate_hz = s.number("sample_rate_hz", [](double v) { return v >= 100 && v <= 20000; },
+                                  "must be in [100, 20000] Hz");
+    ses.drive_rate_hz = s.number("drive_rate_hz", [](double v) { return v > 0; }, "must be > 0");
+    const double dec = ses.sample_rate_hz / ses.drive_rate_hz;
     if (dec < 1.0 || std::abs(dec - std::round(dec)) > 1e-9)
       s.fail("drive_rate_hz", "must divide sample_rate_hz into a whole number of cycles (e.g. 4000/2000)");
-    if (std::abs(1e6 / l.sample_rate_hz - std::round(1e6 / l.sample_rate_hz)) > 1e-9)
+    if (std::abs(1e6 / ses.sample_rate_hz - std::round(1e6 / ses.sample_rate_hz)) > 1e-9)
       s.fail("sample_rate_hz", "the period must be a whole number of microseconds (state_t.utime)");
     l.priority = static_cast<int>(s.integer("priority", 1, 99));
     l.cpu = static_cast<int>(s.integer("cpu", -1, 1023));
@@ -246,23 +78,23 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
     l.log_queue_capacity = static_cast<std::size_t>(s.integer("log_queue_capacity", 1024, 1ll << 24));
     l.bus_queue_capacity = static_cast<std::size_t>(s.integer("bus_queue_capacity", 64, 1ll << 22));
     l.command_queue_capacity = static_cast<std::size_t>(s.integer("command_queue_capacity", 4, 1 << 16));
-    l.max_commands_per_cycle = static_cast<int>(s.integer("max_commands_per_cycle", 1, 64));
+    c.cycle.max_commands_per_cycle = static_cast<int>(s.integer("max_commands_per_cycle", 1, 64));
     l.overrun_policy = s.choice("overrun_policy", {"catch_up", "reanchor"}) == "catch_up" ? OverrunPolicy::kCatchUp
                                                                                           : OverrunPolicy::kReanchor;
     l.max_catch_up_cycles = static_cast<int>(s.integer("max_catch_up_cycles", 0, 1000));
-    l.overrun_fault_consecutive = static_cast<int>(s.integer("overrun_fault_consecutive", 1, 1000000));
-    l.overrun_fault_per_second = static_cast<int>(s.integer("overrun_fault_per_second", 1, 1000000));
+    c.cycle.overrun_fault_consecutive = static_cast<int>(s.integer("overrun_fault_consecutive", 1, 1000000));
+    c.cycle.overrun_fault_per_second = static_cast<int>(s.integer("overrun_fault_per_second", 1, 1000000));
     s.finish();
   }
   {
     auto s = top.sub("admittance");
-    c.admittance.m_adm_kg = s.vec2_positive("m_adm_kg");
-    c.admittance.d_adm_nspm = s.vec2_nonneg("d_adm_nspm");
+    c.session.m_adm_kg = s.vec2_positive("m_adm_kg");
+    c.session.d_adm_nspm = s.vec2_nonneg("d_adm_nspm");
     s.finish();
   }
   {
     auto s = top.sub("handle");
-    c.handle_mass_kg = s.vec2_nonneg("mass_kg");
+    c.session.m_handle_kg = s.vec2_nonneg("mass_kg");
     s.finish();
   }
   {
@@ -300,11 +132,12 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
   {
     auto s = top.sub("perturbation");
     auto& p = c.perturbation;
-    p.duration_s = s.number("duration_s", [](double v) { return v > 0 && v <= 2.0; }, "must be in (0, 2] s");
-    p.amplitude_n = s.nonneg("amplitude_n");
-    if (p.amplitude_n > c.safety.max_pert_amplitude_n)
+    auto& d = c.session.perturbation;
+    d.duration_s = s.number("duration_s", [](double v) { return v > 0 && v <= 2.0; }, "must be in (0, 2] s");
+    d.amplitude_n = s.nonneg("amplitude_n");
+    if (d.amplitude_n > c.safety.max_pert_amplitude_n)
       s.fail("amplitude_n", "exceeds safety.max_pert_amplitude_n (" + std::to_string(c.safety.max_pert_amplitude_n) + " N)");
-    p.trigger_x2_shoulder_m = s.number("trigger_x2_shoulder_m", [](double) { return true; }, "");
+    d.trigger_x2_shoulder_m = s.any_number("trigger_x2_shoulder_m");
     p.angles_deg = s.numbers("angles_deg", 0);
     p.repeats_per_angle = static_cast<int>(s.integer("repeats_per_angle", 0, 1000));
     s.finish();
@@ -337,7 +170,7 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
     // Targets must be reachable inside the virtual walls, and the trigger between them.
     for (const auto* key : {"start_shoulder_m", "goal_shoulder_m"}) {
       const Vec2 t = std::string(key) == "start_shoulder_m" ? p.start_shoulder_m : p.goal_shoulder_m;
-      const Vec2 w = c.frames.point_to_workspace(t);
+      const Vec2 w = c.session.frame.point_to_workspace(t);
       if (std::abs(w.x()) + p.target_radius_m > c.safety.wall_start_m + 1e-9 ||
           std::abs(w.y()) + p.target_radius_m > c.safety.wall_start_m + 1e-9)
         s.fail(key, "target (with its radius) lies outside the virtual walls of the workspace (workspace frame: " +
@@ -345,7 +178,7 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
     }
     if ((p.goal_shoulder_m - p.start_shoulder_m).norm() < 2 * p.target_radius_m)
       s.fail("goal_shoulder_m", "start and goal targets overlap");
-    const double trig = c.perturbation.trigger_x2_shoulder_m;
+    const double trig = c.session.perturbation.trigger_x2_shoulder_m;
     if (perturbed > 0 && !((trig - p.start_shoulder_m.y()) * (trig - p.goal_shoulder_m.y()) < 0))
       s.fail("goal_shoulder_m", "perturbation.trigger_x2_shoulder_m must lie strictly between start and goal x2");
     s.finish();
@@ -358,8 +191,8 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
   {
     auto s = top.sub("bus");
     c.bus.lcm_url = s.string("lcm_url");
-    c.bus.state_rate_hz = s.positive("state_rate_hz");
-    if (c.bus.state_rate_hz > c.loop.sample_rate_hz) s.fail("state_rate_hz", "must not exceed loop.sample_rate_hz");
+    c.cycle.live_state_rate_hz = s.positive("state_rate_hz");
+    if (c.cycle.live_state_rate_hz > c.session.sample_rate_hz) s.fail("state_rate_hz", "must not exceed loop.sample_rate_hz");
     c.bus.health_rate_hz = s.number("health_rate_hz", [](double v) { return v > 0 && v <= 100; }, "must be in (0, 100]");
     c.bus.subscription_queue_capacity = static_cast<int>(s.integer("subscription_queue_capacity", 1, 1000000));
     s.finish();
@@ -416,17 +249,69 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
 
 }  // namespace
 
-int LoopConfig::drive_decimation() const {
-  return static_cast<int>(std::lround(sample_rate_hz / drive_rate_hz));
+
+schema::SessionDescription default_session() {
+  schema::SessionDescription d;
+  d.software_version = manip::kVersion;
+  d.participant_id = "sim-001";
+  d.session_id = "sim-session-001";
+  return d;
+}
+
+namespace {
+
+// Appends "key" to `diff` when a != b and diff is still empty.
+template <class T>
+void cmp(std::string& diff, const char* key, const T& a, const T& b) {
+  if (diff.empty() && !(a == b)) diff = key;
+}
+void cmp2(std::string& diff, const char* key, const double (&a)[2], const double (&b)[2]) {
+  if (diff.empty() && (a[0] != b[0] || a[1] != b[1])) diff = key;
+}
+
+}  // namespace
+
+std::string first_difference(const RtConfig& a, const RtConfig& b) {
+  std::string d;
+  const auto &sa = a.session, &sb = b.session;
+  cmp(d, "participant.participant_id", sa.participant_id, sb.participant_id);
+  cmp(d, "participant.session_id", sa.session_id, sb.session_id);
+  cmp(d, "participant.body_mass_kg", sa.body_mass_kg, sb.body_mass_kg);
+  cmp(d, "participant.body_height_m", sa.body_height_m, sb.body_height_m);
+  cmp2(d, "participant.segment_length_m", sa.anthropometrics.length_m, sb.anthropometrics.length_m);
+  cmp2(d, "participant.segment_mass_kg", sa.anthropometrics.mass_kg, sb.anthropometrics.mass_kg);
+  cmp2(d, "participant.segment_com_m", sa.anthropometrics.com_m, sb.anthropometrics.com_m);
+  cmp2(d, "participant.segment_inertia_kgm2", sa.anthropometrics.inertia_kgm2, sb.anthropometrics.inertia_kgm2);
+  cmp(d, "frames.workspace_origin_in_shoulder_m", sa.frame.origin_in_shoulder_m, sb.frame.origin_in_shoulder_m);
+  cmp(d, "frames.workspace_to_shoulder_rot_rad", sa.frame.rot_rad, sb.frame.rot_rad);
+  cmp(d, "loop.sample_rate_hz", sa.sample_rate_hz, sb.sample_rate_hz);
+  cmp(d, "loop.drive_rate_hz", sa.drive_rate_hz, sb.drive_rate_hz);
+  cmp(d, "admittance.m_adm_kg", sa.m_adm_kg, sb.m_adm_kg);
+  cmp(d, "admittance.d_adm_nspm", sa.d_adm_nspm, sb.d_adm_nspm);
+  cmp(d, "handle.mass_kg", sa.m_handle_kg, sb.m_handle_kg);
+  cmp(d, "perturbation.duration_s", sa.perturbation.duration_s, sb.perturbation.duration_s);
+  cmp(d, "perturbation.amplitude_n", sa.perturbation.amplitude_n, sb.perturbation.amplitude_n);
+  cmp(d, "perturbation.trigger_x2_shoulder_m", sa.perturbation.trigger_x2_shoulder_m,
+      sb.perturbation.trigger_x2_shoulder_m);
+  cmp(d, "session.schema_version", sa.schema_version, sb.schema_version);
+  // The law's and the runtime's sections: defaulted operator== per struct
+  // (every member), so a field added later is compared without touching this.
+  cmp(d, "loop (cycle part) / bus.state_rate_hz", a.cycle, b.cycle);
+  cmp(d, "pd", a.pd, b.pd);
+  cmp(d, "safety", a.safety, b.safety);
+  cmp(d, "perturbation.angles_deg/repeats_per_angle", a.perturbation, b.perturbation);
+  cmp(d, "protocol", a.protocol, b.protocol);
+  cmp(d, "loop", a.loop, b.loop);
+  cmp(d, "logger", a.logger, b.logger);
+  cmp(d, "bus", a.bus, b.bus);
+  cmp(d, "sim.human", a.sim.human, b.sim.human);
+  cmp(d, "sim.participant", a.sim.participant, b.sim.participant);
+  cmp(d, "sim", a.sim, b.sim);
+  return d;
 }
 
 RtConfig parse_rt_config(const std::string& yaml_text, const std::string& name, const ConfigOverrides& overrides) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(name + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg);
-  }
+  YAML::Node root = yaml::parse(yaml_text, name);
   if (!root.IsMap()) throw ConfigError(name + ": expected a YAML mapping at the top level");
   std::string effective = yaml_text;
   if (!overrides.empty()) {
@@ -455,11 +340,7 @@ RtConfig parse_rt_config(const std::string& yaml_text, const std::string& name, 
 }
 
 RtConfig load_rt_config(const std::string& path, const ConfigOverrides& overrides) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ConfigError(path + ": cannot read the configuration file");
-  std::ostringstream os;
-  os << in.rdbuf();
-  return parse_rt_config(os.str(), path, overrides);
+  return parse_rt_config(yaml::read_text_file(path), path, overrides);
 }
 
 ConfigOverrides trials_overrides(const RtConfig& cfg, int n_movements) {
@@ -468,4 +349,4 @@ ConfigOverrides trials_overrides(const RtConfig& cfg, int n_movements) {
   return {{"protocol.movements", std::to_string(n_movements)}, {"protocol.perturbed_trials", std::to_string(k)}};
 }
 
-}  // namespace manip::control
+}  // namespace manip::runtime

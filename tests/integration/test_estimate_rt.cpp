@@ -4,22 +4,23 @@
 // 2 kHz drive rate, 1 um encoders) costs the estimate.
 #include <catch2/catch.hpp>
 
-#include "offline_run.hpp"
-#include "sanitized.hpp"
+#include "../hardware/offline_run.hpp"
+#include "../hardware/sanitized.hpp"
 
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <sstream>
 
-#include "manip/control/config.hpp"
+#include "manip/runtime/config.hpp"
 #include "manip/estimation/session_estimator.hpp"
-#include "manip/hardware/runner.hpp"
+#include "manip/runtime/session.hpp"
 #include "manip/hardware/sim_backend.hpp"
 #include "manip/logging/session_stream.hpp"
 #include "manip/sim/session_runner.hpp"
 
 using namespace manip::control;
+using namespace manip::runtime;
 namespace hw = manip::hardware;
 using manip::Mat2;
 
@@ -47,10 +48,10 @@ namespace {
 namespace est = manip::estimation;
 
 est::Report estimate_rendered(const RtConfig& cfg, const std::string& path) {
-  hw::SimBackend sim(cfg, hw::make_sim_human(cfg));
+  hw::SimBackend sim(cfg, cfg.sim, hw::make_sim_human(cfg, cfg.sim));
   const auto opt = offline_run_options(path);
   std::ostringstream out;
-  const auto rep = hw::run_session(cfg, sim, opt, out);
+  const auto rep = manip::runtime::run_session(cfg, sim, opt, out);
   REQUIRE(rep.exit_code == 0);
   REQUIRE(rep.trials.perturbed_completed == cfg.perturbed_count());
   est::EstimatorSettings es;
@@ -63,7 +64,7 @@ est::Report estimate_rendered(const RtConfig& cfg, const std::string& path) {
 // The same person (parameters, reach design, schedule seed) on the ideal admittance.
 est::Report estimate_ideal(const RtConfig& cfg, const std::string& path) {
   manip::sim::SessionDesign d;
-  d.sample_rate_hz = cfg.loop.sample_rate_hz;
+  d.sample_rate_hz = cfg.session.sample_rate_hz;
   d.substeps = cfg.sim.substeps;
   d.n_movements = cfg.protocol.movements;
   d.angles_deg = cfg.perturbation.angles_deg;
@@ -71,20 +72,20 @@ est::Report estimate_ideal(const RtConfig& cfg, const std::string& path) {
   d.write_twins = false;
   d.start_shoulder_m = cfg.protocol.start_shoulder_m;
   d.goal_shoulder_m = cfg.protocol.goal_shoulder_m;
-  d.trigger_x2_shoulder_m = cfg.perturbation.trigger_x2_shoulder_m;
-  d.perturbation = {cfg.perturbation.duration_s, cfg.perturbation.amplitude_n};
+  d.trigger_x2_shoulder_m = cfg.session.perturbation.trigger_x2_shoulder_m;
+  d.perturbation = {cfg.session.perturbation.duration_s, cfg.session.perturbation.amplitude_n};
   d.reach_duration_s = cfg.sim.participant.reach_duration_s;
   d.reach_duration_jitter_s = cfg.sim.participant.reach_duration_jitter_s;
   d.lateral_bow_std_m = cfg.sim.participant.lateral_bow_std_m;
   d.encoder_resolution_m = cfg.sim.encoder_resolution_m;
   d.force_noise_n = cfg.sim.force_noise_n;
-  d.admittance.m_adm_kg = cfg.admittance.m_adm_kg.asDiagonal();
-  d.admittance.d_adm_nspm = cfg.admittance.d_adm_nspm.asDiagonal();
-  d.admittance.m_handle_kg = cfg.handle_mass_kg.asDiagonal();
-  d.frame = cfg.frames;
+  d.admittance.m_adm_kg = cfg.session.m_adm_kg.asDiagonal();
+  d.admittance.d_adm_nspm = cfg.session.d_adm_nspm.asDiagonal();
+  d.admittance.m_handle_kg = cfg.session.m_handle_kg.asDiagonal();
+  d.frame = cfg.session.frame;
   d.seed = cfg.protocol.seed;
   d.source = "manip_sim/linear (test: manip_rt comparison)";
-  auto human = hw::make_sim_human(cfg);
+  auto human = hw::make_sim_human(cfg, cfg.sim);
   {
     manip::logging::LogWritingHandler w(path);
     manip::sim::run_session(d, *human, w);

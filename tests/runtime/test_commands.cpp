@@ -11,15 +11,16 @@
 #include "manip/command_status_t.hpp"
 #include "manip/command_t.hpp"
 #include "manip/common/channels.hpp"
-#include "manip/control/bus.hpp"
+#include "manip/runtime/bus.hpp"
 #include "manip/control/controller.hpp"
-#include "manip/control/messages.hpp"
+#include "manip/runtime/messages.hpp"
 #include "manip/trial_event_t.hpp"
-#include "test_support.hpp"
+#include "../control/test_support.hpp"
 
 using manip::Vec2;
 using manip::command_t;
 using namespace manip::control;
+using namespace manip::runtime;
 
 namespace {
 command_t make(std::int8_t kind, std::int64_t seq = 1) {
@@ -137,7 +138,7 @@ struct Rig {
     c.seq = k + 1000;
     c.start_shoulder_m = start;
     c.goal_shoulder_m = goal;
-    REQUIRE(cmds.try_enqueue(c));
+    REQUIRE(cmds.try_push(c));
     const std::size_t before = out.results.size();
     step();
     REQUIRE(out.results.size() == before + 1);
@@ -174,7 +175,7 @@ TEST_CASE("commands: allowed only in the modes the table says", "[commands][cont
   // hand at the workspace origin = (0, 0.425) shoulder: not in the start target
   CHECK(r.send(command_t::NEXT_TRIAL).reason == Reject::kHandNotInStart);
   // move the handle into the start target and start at once with NEXT_TRIAL
-  r.x = r.cfg.frames.point_to_workspace(r.cfg.protocol.start_shoulder_m);
+  r.x = r.cfg.session.frame.point_to_workspace(r.cfg.protocol.start_shoulder_m);
   r.step();
   const auto res = r.send(command_t::NEXT_TRIAL);
   CHECK(res.accepted);
@@ -215,17 +216,17 @@ TEST_CASE("commands: a flood is taken at most max_commands_per_cycle per cycle",
     Command c;
     c.kind = command_t::PERTURBATIONS_ON;
     c.seq = i;
-    REQUIRE(r.cmds.try_enqueue(c));
+    REQUIRE(r.cmds.try_push(c));
   }
   std::size_t prev = r.out.results.size();
   int cycles = 0;
   while (r.cmds.size_approx() > 0) {
     r.step();
     ++cycles;
-    CHECK(r.out.results.size() - prev <= static_cast<std::size_t>(r.cfg.loop.max_commands_per_cycle));
+    CHECK(r.out.results.size() - prev <= static_cast<std::size_t>(r.cfg.cycle.max_commands_per_cycle));
     prev = r.out.results.size();
   }
-  CHECK(cycles == 200 / r.cfg.loop.max_commands_per_cycle);
+  CHECK(cycles == 200 / r.cfg.cycle.max_commands_per_cycle);
   CHECK(r.ctl.mode() == Mode::kIdle);
 }
 

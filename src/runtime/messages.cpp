@@ -1,11 +1,11 @@
-#include "manip/control/messages.hpp"
+#include "manip/runtime/messages.hpp"
 
 #include <chrono>
 #include <cstdio>
 
-#include "manip/version.hpp"
 
-namespace manip::control {
+namespace manip::runtime {
+using namespace manip::control;  // the loop's records and codes
 
 manip::trial_event_t to_message(const TrialEventRecord& r) {
   manip::trial_event_t m{};
@@ -92,34 +92,4 @@ std::int64_t wall_clock_us() {
       .count();
 }
 
-manip::session_t make_session_message(const RtConfig& cfg, const std::string& source, std::int64_t utime_start_us) {
-  manip::session_t s{};
-  s.schema_version = manip::session_t::SCHEMA_VERSION;
-  s.software_version = manip::kVersion;
-  s.source = source;
-  s.utime_start = utime_start_us;
-  s.participant_id = cfg.participant.participant_id;
-  s.session_id = cfg.participant.session_id;
-  s.sample_rate_hz = cfg.loop.sample_rate_hz;
-  s.drive_rate_hz = cfg.loop.drive_rate_hz;
-  for (int i = 0; i < 2; ++i) {
-    s.m_adm_kg[i] = cfg.admittance.m_adm_kg[i];
-    s.d_adm_nspm[i] = cfg.admittance.d_adm_nspm[i];
-    s.m_handle_kg[i] = cfg.handle_mass_kg[i];
-    s.workspace_origin_in_shoulder_m[i] = cfg.frames.origin_in_shoulder_m[i];
-    s.segment_length_m[i] = cfg.participant.segment_length_m[i];
-    s.segment_mass_kg[i] = cfg.participant.segment_mass_kg[i];
-    s.segment_com_m[i] = cfg.participant.segment_com_m[i];
-    s.segment_inertia_kgm2[i] = cfg.participant.segment_inertia_kgm2[i];
-  }
-  s.workspace_to_shoulder_rot_rad = cfg.frames.rot_rad;
-  s.body_mass_kg = cfg.participant.body_mass_kg;
-  s.body_height_m = cfg.participant.body_height_m;
-  s.pert_duration_s = cfg.perturbation.duration_s;
-  s.pert_amplitude_n = cfg.perturbation.amplitude_n;
-  s.trigger_x2_shoulder_m = cfg.perturbation.trigger_x2_shoulder_m;
-  s.config_yaml = cfg.effective_yaml;
-  return s;
-}
-
-}  // namespace manip::control
+}  // namespace manip::runtime

@@ -1,14 +1,15 @@
-#include "manip/control/logger.hpp"
+#include "manip/runtime/logger.hpp"
 
 #include <chrono>
 #include <cstdio>
 #include <thread>
 
 #include "manip/common/channels.hpp"
-#include "manip/control/messages.hpp"
-#include "manip/control/rt_thread.hpp"
+#include "manip/runtime/messages.hpp"
+#include "manip/runtime/rt_thread.hpp"
 
-namespace manip::control {
+namespace manip::runtime {
+using namespace manip::control;  // the loop's records and codes
 namespace {
 std::int64_t mono_ns() { return monotonic_ns(); }
 }  // namespace
@@ -142,14 +143,14 @@ void Logger::maybe_flush(bool force) {
 std::size_t Logger::drain() {
   std::size_t n = 0;
   LoopRecord r;
-  while (q_.try_dequeue(r)) {
+  while (q_.try_pop(r)) {
     handle(r);
     ++n;
     if ((n & 4095) == 0) maybe_flush(false);
   }
   if (aux_) {
     AuxRecord a;
-    while (aux_->try_dequeue(a)) {
+    while (aux_->try_pop(a)) {
       handle_aux(a);
       ++n;
     }
@@ -185,4 +186,4 @@ bool Logger::close(std::string& err) {
   return true;
 }
 
-}  // namespace manip::control
+}  // namespace manip::runtime

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-namespace manip::control {
+namespace manip::runtime {
 
 struct TimingSnapshot {
   std::int64_t cycles{0};
@@ -51,4 +51,4 @@ class TimingStats {
   std::atomic<std::int64_t> overruns_{0}, skipped_{0};
 };
 
-}  // namespace manip::control
+}  // namespace manip::runtime

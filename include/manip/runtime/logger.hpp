@@ -24,16 +24,17 @@
 
 #include "manip/command_status_t.hpp"
 #include "manip/control/records.hpp"
+#include "manip/runtime/spsc_queue.hpp"
 #include "manip/fault_t.hpp"
 #include "manip/health_t.hpp"
 #include "manip/logging/event_log.hpp"
 #include "manip/session_t.hpp"
 #include "manip/state_t.hpp"
 
-namespace manip::control {
+namespace manip::runtime {
 
 using AuxRecord = std::variant<manip::health_t, manip::command_status_t>;
-using AuxQueue = moodycamel::ReaderWriterQueue<AuxRecord>;  // bus thread -> logger (both non-real-time)
+using AuxQueue = SpscQueue<AuxRecord>;  // bus thread -> logger (both non-real-time)
 
 struct LoggerStats {
   std::int64_t states{0};
@@ -75,7 +76,7 @@ class Logger {
   [[nodiscard]] LoggerStats stats() const;
 
  private:
-  void handle(const LoopRecord& r);
+  void handle(const control::LoopRecord& r);
   void handle_aux(const AuxRecord& r);
   template <class Msg>
   void write(const char* channel, std::int64_t utime, const Msg& m);
@@ -101,4 +102,4 @@ class Logger {
   std::int64_t last_utime_{0};
 };
 
-}  // namespace manip::control
+}  // namespace manip::runtime

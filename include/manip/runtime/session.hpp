@@ -1,29 +1,34 @@
 #pragma once
-// Runs one manip_rt session: controller + backend in the loop thread (paced
-// with SCHED_FIFO, or as fast as possible for simulations), the logger thread,
-// the LCM bus thread, and a supervisor (the caller's thread) that watches for
-// signals. apps/manip_rt.cpp is a thin CLI around run_session().
+// One manip_rt session, composed: backend + controller in the loop thread
+// (paced with SCHED_FIFO, or as fast as possible for simulations), the logger
+// thread, the LCM bus thread, and a supervisor (the caller's thread) that
+// watches for signals. apps/manip_rt.cpp is a thin CLI around run_session().
+//
+//   backend.read -> Controller::step -> backend.write      (loop thread, 4 kHz)
+//        records -> SpscQueue -> Logger (file)  /  Bus (live LCM)
+//   Bus (commands) -> SpscQueue -> Controller
 #include <atomic>
 #include <cstdint>
 #include <ostream>
 #include <string>
 #include <vector>
 
-#include "manip/control/config.hpp"
+#include "manip/common/exit_codes.hpp"
 #include "manip/control/controller.hpp"
-#include "manip/control/logger.hpp"
 #include "manip/control/protocol.hpp"
 #include "manip/control/records.hpp"
-#include "manip/control/rt_thread.hpp"
-#include "manip/control/timing.hpp"
 #include "manip/hardware/backend.hpp"
+#include "manip/runtime/config.hpp"
+#include "manip/runtime/logger.hpp"
+#include "manip/runtime/rt_thread.hpp"
+#include "manip/runtime/timing.hpp"
 
-namespace manip::hardware {
+namespace manip::runtime {
 
 // The loop body for the thread wrapper: read -> step -> write -> display.
-class RtCycle final : public control::CycleBody {
+class RtCycle final : public CycleBody {
  public:
-  RtCycle(Backend& b, control::Controller& c) : b_(b), c_(c) {}
+  RtCycle(hardware::Backend& b, control::Controller& c) : b_(b), c_(c) {}
   bool run_cycle(std::int64_t cycle, bool overran) override {
     b_.read(reading_);
     const control::ActuatorCommand& cmd = c_.step(reading_, cycle, overran);
@@ -34,16 +39,23 @@ class RtCycle final : public control::CycleBody {
   [[nodiscard]] const control::SensorReading& reading() const { return reading_; }
 
  private:
-  Backend& b_;
+  hardware::Backend& b_;
   control::Controller& c_;
   control::SensorReading reading_{};
+};
+
+// The real-time environment: detected up front, set up inside the loop
+// thread. Tests replace both to exercise the enforcement without root.
+struct RtEnvironment {
+  RtCapabilities (*detect)(){&detect_rt};
+  RtSetup setup_thread{&setup_rt_loop_thread};
 };
 
 struct RunOptions {
   std::string log_path;        // "" = no log file (tests only)
   bool overwrite_log{false};
   bool realtime{false};        // paced at the sample rate (SCHED_FIFO); false = as fast as possible
-  bool require_rt{false};      // refuse to run without PREEMPT_RT and real-time privileges
+  bool require_rt{false};      // refuse to run without PREEMPT_RT and real-time privileges (exit 9)
   std::string lcm_url;         // "" = config bus.lcm_url; "none" = no live bus
   double duration_s{0.0};      // stop after this much (loop) time; 0 = until the session ends
   bool exit_on_fault{false};   // end the run on a fault (always so when not paced: nobody can reset)
@@ -51,6 +63,7 @@ struct RunOptions {
   double progress_interval_s{10.0};  // progress lines on `out` (0 = none)
   const std::atomic<bool>* interrupt{nullptr};  // set by a signal handler
   std::string source{"manip_rt/sim"};
+  RtEnvironment rt{};
 };
 
 struct RunReport {
@@ -59,9 +72,9 @@ struct RunReport {
   control::StopReason stop_reason{control::StopReason::kNone};
   std::int64_t cycles{0};
   double wall_s{0.0};
-  control::TimingSnapshot timing{};
+  TimingSnapshot timing{};
   std::vector<std::int64_t> latency_histogram;  // 1 us bins, last = over range
-  control::LoggerStats log{};
+  LoggerStats log{};
   std::int64_t log_drops{0}, bus_drops{0};
   std::int64_t commands_accepted{0}, commands_rejected{0};
   std::uint32_t fault_flags{0};
@@ -70,6 +83,11 @@ struct RunReport {
   [[nodiscard]] std::string summary() const;
 };
 
-RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunOptions& opt, std::ostream& out);
+// The session message of a run: cfg.session with source, start time and the
+// effective configuration text filled in.
+schema::SessionDescription session_of_run(const RtConfig& cfg, const std::string& source, std::int64_t utime_start_us);
 
-}  // namespace manip::hardware
+// Configures and enables the backend, runs, and always shuts the backend down.
+RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const RunOptions& opt, std::ostream& out);
+
+}  // namespace manip::runtime

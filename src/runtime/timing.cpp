@@ -1,9 +1,9 @@
-#include "manip/control/timing.hpp"
+#include "manip/runtime/timing.hpp"
 
 #include <algorithm>
 #include <cstdio>
 
-namespace manip::control {
+namespace manip::runtime {
 namespace {
 
 template <std::size_t N>
@@ -82,4 +82,4 @@ std::string TimingSnapshot::summary() const {
   return buf;
 }
 
-}  // namespace manip::control
+}  // namespace manip::runtime

@@ -21,11 +21,12 @@
 #include "manip/command_status_t.hpp"
 #include "manip/command_t.hpp"
 #include "manip/common/frames.hpp"
-#include "manip/control/config.hpp"
+#include "manip/runtime/config.hpp"
 #include "manip/control/controller.hpp"
-#include "manip/control/logger.hpp"
+#include "manip/runtime/logger.hpp"
 #include "manip/control/records.hpp"
-#include "manip/control/timing.hpp"
+#include "manip/runtime/spsc_queue.hpp"
+#include "manip/runtime/timing.hpp"
 #include "manip/fault_t.hpp"
 #include "manip/health_t.hpp"
 #include "manip/session_t.hpp"
@@ -36,7 +37,7 @@ class LCM;
 struct _lcm_recv_buf_t;
 struct _lcm_subscription_t;
 
-namespace manip::control {
+namespace manip::runtime {
 
 struct CommandLimits {
   WorkspaceToShoulder frame{};
@@ -48,7 +49,7 @@ struct CommandLimits {
 };
 
 // Range/unit validation of a decoded command (no state checks).
-Reject validate_command(const manip::command_t& c, const CommandLimits& lim);
+control::Reject validate_command(const manip::command_t& c, const CommandLimits& lim);
 
 // Decode + validate + hand to the loop. Usable without LCM (tests).
 class CommandGate {
@@ -71,7 +72,7 @@ class Bus {
   struct Links {
     RecordQueue* from_loop{nullptr};
     CommandQueue* to_loop{nullptr};
-    const ControllerStatus* status{nullptr};
+    const control::ControllerStatus* status{nullptr};
     const TimingStats* timing{nullptr};
     AuxQueue* to_logger{nullptr};  // health and bus-side rejections into the log
   };
@@ -113,4 +114,4 @@ class Bus {
   std::int64_t publish_errors_{0};
 };
 
-}  // namespace manip::control
+}  // namespace manip::runtime

@@ -1,24 +1,28 @@
-#include "manip/hardware/runner.hpp"
+#include "manip/runtime/session.hpp"
 
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
+#include <future>
 #include <memory>
 #include <sstream>
 #include <thread>
 
-#include "manip/control/bus.hpp"
-#include "manip/control/messages.hpp"
+#include "manip/runtime/bus.hpp"
+#include "manip/runtime/messages.hpp"
+#include "manip/runtime/spsc_queue.hpp"
+#include "manip/version.hpp"
 
-namespace manip::hardware {
+namespace manip::runtime {
 namespace {
 
 using namespace std::chrono_literals;
 
-class QueueBackpressure final : public control::Backpressure {
+class QueueBackpressure final : public Backpressure {
  public:
-  QueueBackpressure(const control::RecordQueue* log, std::size_t log_cap, const control::RecordQueue* bus,
+  QueueBackpressure(const RecordQueue* log, std::size_t log_cap, const RecordQueue* bus,
                     std::size_t bus_cap)
       : log_(log), bus_(bus), log_cap_(log_cap), bus_cap_(bus_cap) {}
   bool must_wait() const override {
@@ -30,8 +34,8 @@ class QueueBackpressure final : public control::Backpressure {
   }
 
  private:
-  const control::RecordQueue* log_;
-  const control::RecordQueue* bus_;
+  const RecordQueue* log_;
+  const RecordQueue* bus_;
   std::size_t log_cap_, bus_cap_;
 };
 
@@ -56,20 +60,30 @@ std::string RunReport::summary() const {
   return os.str();
 }
 
-RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunOptions& opt, std::ostream& out) {
+schema::SessionDescription session_of_run(const RtConfig& cfg, const std::string& source, std::int64_t utime_start_us) {
+  schema::SessionDescription d = cfg.session;
+  d.software_version = manip::kVersion;
+  d.source = source;
+  d.utime_start_us = utime_start_us;
+  d.config_yaml = cfg.effective_yaml;
+  return d;
+}
+
+RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const RunOptions& opt, std::ostream& out) {
   using control::StopReason;
   RunReport rep;
   auto fail = [&](int code, const std::string& msg) {
+    backend.shutdown();
     rep.exit_code = code;
     rep.message = msg;
     return rep;
   };
 
   // --- real-time capability checks (before anything starts) -----------------
-  const control::RtCapabilities caps = control::detect_rt();
   if (!opt.realtime && !backend.supports_as_fast_as_possible())
     return fail(exit_code::kUsage, "backend '" + backend.name() + "' can only run paced in real time (--realtime)");
   if (opt.realtime) {
+    const RtCapabilities caps = opt.rt.detect();
     const bool fifo_ok = caps.can_fifo(cfg.loop.priority);
     if (opt.require_rt && (!caps.preempt_rt || !fifo_ok)) {
       std::string why;
@@ -90,18 +104,13 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
       out << "manip_rt: warning: no real-time privileges (not root, RLIMIT_RTPRIO " << caps.rtprio_limit
           << "): the loop runs with SCHED_OTHER and its timing will be unreliable; run as root or grant rtprio "
           << cfg.loop.priority << " (use --require-rt to refuse)\n";
-    std::string err;
-    if (!control::lock_memory(err)) {
-      if (opt.require_rt) return fail(exit_code::kRealtime, "--require-rt: " + err);
-      out << "manip_rt: warning: " << err << "\n";
-    }
   }
 
   // --- queues, controller ------------------------------------------------------
-  control::RecordQueue log_q(cfg.loop.log_queue_capacity);
-  control::RecordQueue bus_q(cfg.loop.bus_queue_capacity);
-  control::CommandQueue cmd_q(cfg.loop.command_queue_capacity);
-  control::AuxQueue aux_q(1024);
+  RecordQueue log_q(cfg.loop.log_queue_capacity);
+  RecordQueue bus_q(cfg.loop.bus_queue_capacity);
+  CommandQueue cmd_q(cfg.loop.command_queue_capacity);
+  AuxQueue aux_q(1024);
   const bool want_log = !opt.log_path.empty();
   const std::string url = opt.lcm_url.empty() ? cfg.bus.lcm_url : opt.lcm_url;
   const bool want_bus = url != "none";
@@ -109,86 +118,129 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
   control::ControllerOptions copt;
   copt.stop_when_done = true;
   copt.stop_on_fault = opt.exit_on_fault || !opt.realtime;
-  copt.max_cycles = opt.duration_s > 0 ? std::llround(opt.duration_s * cfg.loop.sample_rate_hz) : 0;
-  copt.utime_start_us = control::wall_clock_us();
+  copt.max_cycles = opt.duration_s > 0 ? std::llround(opt.duration_s * cfg.session.sample_rate_hz) : 0;
+  copt.utime_start_us = wall_clock_us();
   control::Controller ctl(cfg, {want_log ? &log_q : nullptr, want_bus ? &bus_q : nullptr, &cmd_q}, copt);
-  control::TimingStats timing;
+  TimingStats timing;
+
+  // --- the loop thread: real-time set-up first, then it waits for "go" --------
+  // The set-up (mlockall, SCHED_FIFO, affinity, stack) can only be applied by
+  // the thread itself; its result decides, before the log, the bus or the
+  // drives are touched, whether a --require-rt run may start at all.
+  RtCycle body(backend, ctl);
+  std::promise<std::string> setup_promise;  // "" = real-time set-up complete
+  std::promise<bool> go_promise;
+  std::shared_future<bool> go = go_promise.get_future().share();
+  std::atomic<bool> loop_done{false};
+  std::thread loop_thread([&] {
+    std::string err;
+    if (opt.realtime) {
+      const RtThreadOptions ro{cfg.loop.priority, cfg.loop.cpu, cfg.loop.prefault_stack_bytes};
+      if (!opt.rt.setup_thread(ro, err) && err.empty()) err = "real-time set-up failed";
+    }
+    setup_promise.set_value(err);
+    if (go.get()) {
+      if (opt.realtime) {
+        const PacedOptions po{std::llround(1e9 / cfg.session.sample_rate_hz), cfg.loop.overrun_policy,
+                              cfg.loop.max_catch_up_cycles};
+        rep.cycles = run_paced(body, po, timing);
+      } else {
+        QueueBackpressure bp(want_log ? &log_q : nullptr, cfg.loop.log_queue_capacity, want_bus ? &bus_q : nullptr,
+                             cfg.loop.bus_queue_capacity);
+        rep.cycles = run_as_fast_as_possible(body, timing, &bp);
+      }
+    }
+    loop_done.store(true, std::memory_order_release);
+  });
+  bool released = false;
+  auto release_loop = [&](bool run) {
+    if (released) return;
+    released = true;
+    go_promise.set_value(run);
+    if (!run) loop_thread.join();
+  };
+  // An exception during set-up (e.g. std::bad_alloc) must not leave the loop
+  // thread waiting for "go" (std::terminate on its destruction).
+  struct LoopGuard {
+    std::function<void()> release;
+    ~LoopGuard() { release(); }
+  } const loop_guard{[&] {
+    release_loop(false);
+    if (loop_thread.joinable()) {
+      ctl.request_stop(StopReason::kRequested);  // the orderly stop ends a running loop
+      loop_thread.join();
+    }
+  }};
+  auto abort_run = [&](int code, const std::string& msg) {
+    release_loop(false);
+    return fail(code, msg);
+  };
+  const std::string rt_error = setup_promise.get_future().get();
+  if (!rt_error.empty()) {
+    if (opt.require_rt)
+      return abort_run(exit_code::kRealtime,
+                       "--require-rt: the loop thread's real-time set-up failed (" + rt_error + "); no cycle was run");
+    out << "manip_rt: warning: " << rt_error << "\n";
+  }
 
   // --- logger --------------------------------------------------------------------
-  const manip::session_t session = control::make_session_message(cfg, opt.source, copt.utime_start_us);
-  control::Logger logger(log_q, cfg.safety.fault_history_cycles, cfg.logger.flush_interval_s);
+  const manip::session_t session = schema::to_message(session_of_run(cfg, opt.source, copt.utime_start_us));
+  Logger logger(log_q, cfg.safety.fault_history_cycles, cfg.logger.flush_interval_s);
   if (want_log) {
     std::error_code ec;
     if (!opt.overwrite_log && std::filesystem::exists(opt.log_path, ec))
-      return fail(exit_code::kLog, opt.log_path + ": log file exists; refusing to overwrite a recording (--force to overwrite)");
+      return abort_run(exit_code::kOutput,
+                       opt.log_path + ": log file exists; refusing to overwrite a recording (--force to overwrite)");
     std::string err;
-    if (!logger.open(opt.log_path, session, err)) return fail(exit_code::kLog, "cannot create the log: " + err);
+    if (!logger.open(opt.log_path, session, err)) return abort_run(exit_code::kOutput, "cannot create the log: " + err);
     ctl.set_logger_failed_flag(&logger.failed_flag());
   } else if (!opt.quiet) {
     out << "manip_rt: warning: no log file: nothing of this session is recorded\n";
   }
+  auto close_log_and_abort = [&](int code, const std::string& msg) {
+    std::string e2;
+    logger.close(e2);
+    return abort_run(code, msg);
+  };
 
   // --- live bus ------------------------------------------------------------------
-  std::unique_ptr<control::Bus> bus;
+  std::unique_ptr<Bus> bus;
   if (want_bus) {
-    bus = std::make_unique<control::Bus>(cfg, control::Bus::Links{&bus_q, &cmd_q, &ctl.status(), &timing, want_log ? &aux_q : nullptr});
+    bus = std::make_unique<Bus>(cfg, Bus::Links{&bus_q, &cmd_q, &ctl.status(), &timing, want_log ? &aux_q : nullptr});
     std::string err;
-    if (!bus->open(url, err)) {
-      std::string e2;
-      logger.close(e2);
-      return fail(exit_code::kBus, err);
-    }
+    if (!bus->open(url, err)) return close_log_and_abort(exit_code::kBus, err);
     bus->publish_session(session);
     logger.set_fault_sink([b = bus.get()](const manip::fault_t& f) { b->publish_fault(f); });
   }
   logger.set_aux_queue(want_log && want_bus ? &aux_q : nullptr);
 
-  // --- backend -------------------------------------------------------------------
-  {
-    std::string err;
-    if (!backend.start(err)) {
-      backend.stop();
-      std::string e2;
-      logger.close(e2);
-      return fail(exit_code::kBackendUnavailable, "backend '" + backend.name() + "' failed to start: " + err);
-    }
+  // --- backend: configure (slow, may fail; drives disabled), then enable --------
+  try {
+    backend.configure();
+    backend.enable();
+  } catch (const Error& e) {
+    return close_log_and_abort(exit_code::kBackend, "backend '" + backend.name() + "' failed to start: " + e.what());
+  } catch (const std::exception& e) {
+    return close_log_and_abort(exit_code::kBackend, "backend '" + backend.name() + "' failed to start: " + e.what());
   }
 
-  // --- threads -------------------------------------------------------------------
-  std::atomic<bool> logger_stop{false}, bus_stop{false}, loop_done{false};
+  // --- helper threads, then the loop -------------------------------------------
+  std::atomic<bool> logger_stop{false}, bus_stop{false};
   std::thread logger_thread;
   const int avoid = opt.realtime ? cfg.loop.cpu : -1;  // keep the helpers off the loop's CPU
   if (want_log)
     logger_thread = std::thread([&] {
-      control::avoid_cpu(avoid);
+      avoid_cpu(avoid);
       logger.run(logger_stop);
     });
   std::thread bus_thread;
   if (bus)
     bus_thread = std::thread([&] {
-      control::avoid_cpu(avoid);
+      avoid_cpu(avoid);
       bus->run(bus_stop);
     });
-
-  RtCycle body(backend, ctl);
-  std::string rt_warning;
   const auto wall0 = std::chrono::steady_clock::now();
-  std::thread loop_thread([&] {
-    if (opt.realtime) {
-      control::RtThreadOptions ro{cfg.loop.priority, cfg.loop.cpu, cfg.loop.prefault_stack_bytes};
-      if (!control::configure_rt_thread(ro, rt_warning)) {
-        // Fallback (the privileges were checked up front; this is a late failure).
-      }
-      control::PacedOptions po{std::llround(1e9 / cfg.loop.sample_rate_hz), cfg.loop.overrun_policy,
-                               cfg.loop.max_catch_up_cycles};
-      rep.cycles = control::run_paced(body, po, timing);
-    } else {
-      QueueBackpressure bp(want_log ? &log_q : nullptr, cfg.loop.log_queue_capacity, want_bus ? &bus_q : nullptr,
-                           cfg.loop.bus_queue_capacity);
-      rep.cycles = control::run_as_fast_as_possible(body, timing, &bp);
-    }
-    loop_done.store(true, std::memory_order_release);
-  });
+  release_loop(true);
 
   // --- supervisor ----------------------------------------------------------------
   bool interrupted = false;
@@ -206,7 +258,7 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
       const auto cyc = st.cycle.load(std::memory_order_relaxed);
       char buf[200];
       std::snprintf(buf, sizeof buf, "manip_rt: t = %.1f s (loop time), mode %s, trial %d, log drops %lld\n",
-                    static_cast<double>(cyc) / cfg.loop.sample_rate_hz,
+                    static_cast<double>(cyc) / cfg.session.sample_rate_hz,
                     control::mode_name(static_cast<control::Mode>(st.mode.load(std::memory_order_relaxed))),
                     st.trial.load(std::memory_order_relaxed),
                     static_cast<long long>(st.log_drops.load(std::memory_order_relaxed)));
@@ -214,9 +266,8 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
     }
   }
   loop_thread.join();
-  backend.stop();
+  backend.shutdown();
   rep.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
-  if (!rt_warning.empty()) out << "manip_rt: warning: " << rt_warning << "\n";
 
   bus_stop.store(true, std::memory_order_release);
   if (bus_thread.joinable()) bus_thread.join();
@@ -240,7 +291,7 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
   rep.remaining_slots = ctl.protocol().remaining();
 
   if (!log_ok || rep.stop_reason == StopReason::kLogger) {
-    rep.exit_code = exit_code::kLog;
+    rep.exit_code = exit_code::kOutput;
     rep.message = "log writing failed: " + (log_err.empty() ? logger.error() : log_err) +
                   " (the session was stopped; motors were put in the safe state)";
   } else if (rep.stop_reason == StopReason::kFault) {
@@ -256,4 +307,4 @@ RunReport run_session(const control::RtConfig& cfg, Backend& backend, const RunO
   return rep;
 }
 
-}  // namespace manip::hardware
+}  // namespace manip::runtime

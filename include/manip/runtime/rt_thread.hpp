@@ -15,10 +15,10 @@
 #include <string>
 #include <vector>
 
-#include "manip/control/config.hpp"
-#include "manip/control/timing.hpp"
+#include "manip/runtime/config.hpp"
+#include "manip/runtime/timing.hpp"
 
-namespace manip::control {
+namespace manip::runtime {
 
 // CLOCK_MONOTONIC now [ns]: the one clock of the loop, the logger and the bus.
 std::int64_t monotonic_ns();
@@ -44,6 +44,13 @@ bool lock_memory(std::string& err);
 // Applies SCHED_FIFO + affinity to the calling thread and pre-faults its stack.
 // Returns false + err if SCHED_FIFO (or the affinity) could not be set.
 bool configure_rt_thread(const RtThreadOptions& o, std::string& err);
+
+// What the paced loop thread does before its first cycle: lock memory
+// (mlockall) and configure_rt_thread. False + err when either failed; with
+// --require-rt the run then ends before the first cycle (exit code 9), like
+// libfranka's RealtimeConfig::kEnforce. Replaceable for tests.
+using RtSetup = bool (*)(const RtThreadOptions& o, std::string& err);
+bool setup_rt_loop_thread(const RtThreadOptions& o, std::string& err);
 void prefault_stack(std::size_t bytes);
 // Keeps the calling (non-real-time) thread off `cpu` (the loop's CPU), if
 // other CPUs exist. No-op for cpu < 0.
@@ -72,4 +79,4 @@ class Backpressure {
 };
 std::int64_t run_as_fast_as_possible(CycleBody& body, TimingStats& stats, const Backpressure* bp);
 
-}  // namespace manip::control
+}  // namespace manip::runtime

@@ -4,10 +4,13 @@
 #include <fstream>
 #include <sstream>
 
-#include "manip/control/config.hpp"
-#include "test_support.hpp"
+#include "manip/runtime/config.hpp"
+#include "manip/runtime/session.hpp"
+#include "manip/schema/session_description.hpp"
+#include "../control/test_support.hpp"
 
 using namespace manip::control;
+using namespace manip::runtime;
 
 namespace {
 std::string shipped_text() {
@@ -19,7 +22,7 @@ std::string shipped_text() {
 std::string error_of(const std::string& text) {
   try {
     parse_rt_config(text, "cfg.yaml");
-  } catch (const ConfigError& e) {
+  } catch (const manip::ConfigError& e) {
     return e.what();
   }
   return "";
@@ -32,28 +35,84 @@ std::string replace(std::string s, const std::string& from, const std::string& t
 }
 }  // namespace
 
-TEST_CASE("the shipped config/rt.yaml is valid and equals the built-in defaults", "[config]") {
+TEST_CASE("the shipped config/rt.yaml is valid and equals the built-in defaults, every field", "[config]") {
   const RtConfig c = test_support::shipped_config();
   const RtConfig d;
-  CHECK(c.loop.sample_rate_hz == d.loop.sample_rate_hz);
-  CHECK(c.loop.drive_decimation() == 2);
-  CHECK(c.admittance.m_adm_kg == d.admittance.m_adm_kg);
-  CHECK(c.admittance.d_adm_nspm == d.admittance.d_adm_nspm);
-  CHECK(c.handle_mass_kg == d.handle_mass_kg);
-  CHECK(c.pd.kp_npm == d.pd.kp_npm);
-  CHECK(c.pd.kd_nspm == d.pd.kd_nspm);
-  CHECK(c.pd.ff_mass_kg == d.pd.ff_mass_kg);
-  CHECK(c.frames.origin_in_shoulder_m == d.frames.origin_in_shoulder_m);
+  INFO("first differing key: " << first_difference(c, d));
+  CHECK(first_difference(c, d).empty());
+  // The values the paper fixes (§4.2, §5.1, §5.2), independently of both.
+  CHECK(c.session.sample_rate_hz == 4000.0);
+  CHECK(c.drive_decimation() == 2);
+  CHECK(c.session.m_adm_kg == manip::Vec2(5.0, 5.0));
+  CHECK(c.session.d_adm_nspm == manip::Vec2(15.0, 15.0));
+  CHECK(c.session.perturbation.duration_s == 0.15);
+  CHECK(c.session.perturbation.amplitude_n == 15.0);
+  CHECK(c.session.perturbation.trigger_x2_shoulder_m == 0.40);
   CHECK(c.protocol.movements == 100);
   CHECK(c.perturbed_count() == 24);
-  CHECK(c.protocol.seed == d.protocol.seed);
-  CHECK(c.protocol.goal_hold_s == d.protocol.goal_hold_s);
-  CHECK(c.safety.max_motor_force_n == d.safety.max_motor_force_n);
-  CHECK(c.safety.workspace_limit_m == d.safety.workspace_limit_m);
-  CHECK(c.sim.stage_mass_kg == d.sim.stage_mass_kg);
-  CHECK(c.sim.human.k_npm == d.sim.human.k_npm);
-  CHECK(c.sim.human.m_load_kg == d.sim.human.m_load_kg);
+  // rt.yaml's stable voluntary gains (its comment: 300/30 is unstable on M_adm = 5 kg)
+  CHECK(c.sim.human.k_voluntary_npm == manip::Mat2::Identity() * 100.0);
+  CHECK(c.sim.human.d_voluntary_nspm == manip::Mat2::Identity() * 20.0);
   CHECK(c.effective_yaml == shipped_text());  // no overrides: the file verbatim
+  CHECK(d.session.invalid_reason() == std::nullopt);
+}
+
+TEST_CASE("the defaults comparison sees a change in any field", "[config]") {
+  // One override per section and per session field: first_difference must
+  // name it, so the defaults test above cannot pass by comparing too little.
+  const std::vector<std::pair<std::string, std::string>> changes = {
+      {"participant.session_id", "\"other\""},
+      {"participant.body_mass_kg", "70"},
+      {"participant.segment_length_m", "[0.30, 0.34]"},
+      {"participant.segment_inertia_kgm2", "[0.0141, 0.02]"},
+      {"frames.workspace_origin_in_shoulder_m", "[0.001, 0.425]"},
+      {"frames.workspace_to_shoulder_rot_rad", "0.1"},
+      {"loop.sample_rate_hz", "2000.0"},
+      {"loop.priority", "70"},
+      {"loop.max_commands_per_cycle", "3"},
+      {"admittance.d_adm_nspm", "[15.0, 16.0]"},
+      {"handle.mass_kg", "[0.25, 0.3]"},
+      {"pd.ff_sensor_force_gain", "0.5"},
+      {"safety.shutdown_cycles", "41"},
+      {"perturbation.trigger_x2_shoulder_m", "0.41"},
+      {"perturbation.repeats_per_angle", "2"},
+      {"protocol.max_requeues", "2"},
+      {"logger.flush_interval_s", "0.25"},
+      {"bus.health_rate_hz", "2.0"},
+      {"bus.state_rate_hz", "125.0"},
+      {"sim.substeps", "2"},
+      {"sim.human.motor_noise_tau_s", "0.06"},
+      {"sim.participant.lateral_bow_std_m", "0.004"},
+  };
+  const RtConfig d;
+  for (const auto& [key, value] : changes) {
+    const RtConfig c = test_support::shipped_config({{key, value}});
+    INFO(key << " = " << value);
+    const std::string diff = first_difference(c, d);
+    CHECK_FALSE(diff.empty());
+    CHECK(diff.find(key.substr(0, key.find('.'))) != std::string::npos);
+  }
+}
+
+TEST_CASE("one session description: a value changed in rt.yaml reaches the session message", "[config][session]") {
+  const RtConfig c = test_support::shipped_config({{"handle.mass_kg", "[0.4, 0.45]"},
+                                                    {"participant.segment_mass_kg", "[2.0, 1.6]"},
+                                                    {"admittance.m_adm_kg", "[6.0, 7.0]"}});
+  const manip::session_t m = manip::schema::to_message(session_of_run(c, "manip_rt/test", 123));
+  CHECK(m.m_handle_kg[0] == 0.4);
+  CHECK(m.m_handle_kg[1] == 0.45);
+  CHECK(m.segment_mass_kg[0] == 2.0);
+  CHECK(m.segment_mass_kg[1] == 1.6);
+  CHECK(m.m_adm_kg[0] == 6.0);
+  CHECK(m.m_adm_kg[1] == 7.0);
+  CHECK(m.source == "manip_rt/test");
+  CHECK(m.utime_start == 123);
+  CHECK(m.config_yaml == c.effective_yaml);
+  CHECK(m.participant_id == "sim-001");
+  // and the controller's admittance is the same one (eq. 20)
+  const manip::schema::SessionDescription back = manip::schema::from_message(m);
+  CHECK(back.m_adm_kg == c.session.m_adm_kg);
+  CHECK(back.m_handle_kg == c.session.m_handle_kg);
 }
 
 TEST_CASE("config errors name the file, the line, the key and the reason", "[config]") {
@@ -113,6 +172,10 @@ TEST_CASE("config errors name the file, the line, the key and the reason", "[con
   }
   SECTION("bad choice") {
     CHECK(error_of(replace(base, "safe_law: damping", "safe_law: brake")).find("safety.safe_law: must be one of zero_force, damping") !=
+          std::string::npos);
+  }
+  SECTION("duplicate key") {
+    CHECK(error_of(replace(base, "  movements: 100", "  movements: 100\n  movements: 10")).find("protocol.movements: duplicate key") !=
           std::string::npos);
   }
   SECTION("YAML syntax") {

@@ -2,8 +2,8 @@
 // threads), checked from the log file they write.
 #include <catch2/catch.hpp>
 
-#include "offline_run.hpp"
-#include "sanitized.hpp"
+#include "../hardware/offline_run.hpp"
+#include "../hardware/sanitized.hpp"
 
 #include <sys/resource.h>
 
@@ -17,9 +17,11 @@
 
 #include "manip/common/channels.hpp"
 #include "manip/common/perturbation.hpp"
-#include "manip/control/config.hpp"
+#include "manip/runtime/config.hpp"
+#include "manip/common/errors.hpp"
 #include "manip/hardware/backend.hpp"
-#include "manip/hardware/runner.hpp"
+#include "manip/runtime/backends.hpp"
+#include "manip/runtime/session.hpp"
 #include "manip/hardware/sim_backend.hpp"
 #include "manip/logging/event_log.hpp"
 #include "manip/session_t.hpp"
@@ -27,7 +29,9 @@
 #include "manip/trial_event_t.hpp"
 
 using namespace manip::control;
+using namespace manip::runtime;
 namespace hw = manip::hardware;
+namespace ec = manip::exit_code;
 using manip::Vec2;
 
 namespace {
@@ -84,14 +88,14 @@ LogContents read_log(const std::string& path, bool keep_states) {
   return c;
 }
 
-hw::RunReport run(const RtConfig& cfg, const std::string& log, std::ostringstream& out, hw::RunOptions opt = {}) {
-  auto made = hw::make_backend("sim", cfg);
-  REQUIRE(made.backend);
+RunReport run(const RtConfig& cfg, const std::string& log, std::ostringstream& out, RunOptions opt = {}) {
+  const auto backend = make_backend("sim", cfg);
+  REQUIRE(backend);
   opt.log_path = log;
   opt.overwrite_log = true;
   if (opt.lcm_url.empty()) opt.lcm_url = "none";
   opt.quiet = true;
-  return hw::run_session(cfg, *made.backend, opt, out);
+  return run_session(cfg, *backend, opt, out);
 }
 
 }  // namespace
@@ -105,7 +109,7 @@ TEST_CASE("shortened session: log is complete, gapless, and the onsets are the f
   std::ostringstream out;
   const auto rep = run(cfg, path, out);
   INFO(out.str() << rep.summary());
-  REQUIRE(rep.exit_code == hw::exit_code::kOk);
+  REQUIRE(rep.exit_code == ec::kOk);
   CHECK(rep.stop_reason == StopReason::kSessionDone);
   CHECK(rep.trials.completed == cfg.protocol.movements);
   CHECK(rep.trials.perturbed_completed == cfg.perturbed_count());
@@ -127,7 +131,7 @@ TEST_CASE("shortened session: log is complete, gapless, and the onsets are the f
   CHECK(s.segment_inertia_kgm2[1] == 0.0188);
   CHECK(s.pert_duration_s == 0.15);
   CHECK(s.trigger_x2_shoulder_m == 0.40);
-  CHECK(s.participant_id == cfg.participant.participant_id);
+  CHECK(s.participant_id == cfg.session.participant_id);
   CHECK(s.config_yaml == cfg.effective_yaml);
   CHECK(s.config_yaml.find("protocol.movements=" + std::to_string(cfg.protocol.movements)) != std::string::npos);
   CHECK(lc.gaps == 0);
@@ -137,7 +141,7 @@ TEST_CASE("shortened session: log is complete, gapless, and the onsets are the f
   CHECK(lc.states[0].utime == s.utime_start);
 
   // events: START/END pairs, ONSET only on perturbed trials, at the first crossing of the logged x2
-  const manip::WorkspaceToShoulder fr = cfg.frames;
+  const manip::WorkspaceToShoulder fr = cfg.session.frame;
   const manip::PerturbationProfile prof{0.15, 15.0};
   std::map<int, const manip::trial_event_t*> start_of;
   int onsets = 0;
@@ -206,7 +210,7 @@ TEST_CASE("full 100-movement session: gapless log, 24 perturbations", "[session]
   const auto rep = run(cfg, path, out);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   INFO(out.str() << rep.summary());
-  REQUIRE(rep.exit_code == hw::exit_code::kOk);
+  REQUIRE(rep.exit_code == ec::kOk);
   const LogContents lc = read_log(path, false);
   std::filesystem::remove(path);
   WARN(cfg.protocol.movements << "-movement session: " << rep.cycles << " cycles (" << rep.cycles / 4000.0
@@ -237,7 +241,7 @@ TEST_CASE("a log that cannot be written at start is refused (exit 6)", "[session
   const RtConfig cfg = shortened(4);
   std::ostringstream out;
   const auto rep = run(cfg, "/dev/full", out);
-  CHECK(rep.exit_code == hw::exit_code::kLog);
+  CHECK(rep.exit_code == ec::kOutput);
   CHECK(rep.message.find("No space left on device") != std::string::npos);
   CHECK(rep.cycles == 0);
 }
@@ -245,8 +249,8 @@ TEST_CASE("a log that cannot be written at start is refused (exit 6)", "[session
 TEST_CASE("the disk filling up during a session ends it safely and loudly (exit 6)", "[session][logger]") {
   // A file-size limit makes writes fail part-way (EFBIG), like a full disk.
   const RtConfig cfg = shortened(4);
-  auto made = hw::make_backend("sim", cfg);
-  auto* sim = dynamic_cast<hw::SimBackend*>(made.backend.get());
+  const auto backend = make_backend("sim", cfg);
+  auto* sim = dynamic_cast<hw::SimBackend*>(backend.get());
   REQUIRE(sim);
   const std::string path = tmp("fsize");
   const auto opt = offline_run_options(path);
@@ -257,11 +261,11 @@ TEST_CASE("the disk filling up during a session ends it safely and loudly (exit 
   rlimit lim = old;
   lim.rlim_cur = (kSanitized ? 2 : 4) << 20;  // 4 MiB: ~5 s of loop time
   REQUIRE(setrlimit(RLIMIT_FSIZE, &lim) == 0);
-  const auto rep = hw::run_session(cfg, *made.backend, opt, out);
+  const auto rep = run_session(cfg, *backend, opt, out);
   setrlimit(RLIMIT_FSIZE, &old);
   std::signal(SIGXFSZ, old_handler);
   INFO(rep.summary());
-  CHECK(rep.exit_code == hw::exit_code::kLog);
+  CHECK(rep.exit_code == ec::kOutput);
   CHECK(rep.stop_reason == StopReason::kLogger);
   CHECK(rep.message.find("File too large") != std::string::npos);
   CHECK((rep.fault_flags & fault::kLogger) != 0u);
@@ -278,43 +282,49 @@ TEST_CASE("the disk filling up during a session ends it safely and loudly (exit 
 
 TEST_CASE("backends and options refused with their exit codes", "[session]") {
   const RtConfig cfg = load_rt_config(cfg_path());
-  auto can = hw::make_backend("can", cfg);
-  CHECK_FALSE(can.backend);
-  CHECK(can.exit_code == hw::exit_code::kBackendUnavailable);
-  CHECK(can.error.find("not implemented") != std::string::npos);
-  auto bad = hw::make_backend("serial", cfg);
-  CHECK(bad.exit_code == hw::exit_code::kUsage);
+  try {
+    (void)make_backend("can", cfg);
+    FAIL("backend 'can' was not refused");
+  } catch (const manip::Error& e) {
+    CHECK(e.exit_code() == ec::kBackend);
+    CHECK(std::string(e.what()).find("not implemented") != std::string::npos);
+  }
+  try {
+    (void)make_backend("serial", cfg);
+    FAIL("backend 'serial' was not refused");
+  } catch (const manip::Error& e) {
+    CHECK(e.exit_code() == ec::kUsage);
+  }
 
   // an existing log is never overwritten without --force
   const std::string path = tmp("exists");
   { std::FILE* f = std::fopen(path.c_str(), "w"); REQUIRE(f); std::fclose(f); }
-  auto made = hw::make_backend("sim", cfg);
-  hw::RunOptions opt;
+  RunOptions opt;
   opt.log_path = path;
   opt.lcm_url = "none";
   std::ostringstream out;
-  CHECK(hw::run_session(cfg, *made.backend, opt, out).exit_code == hw::exit_code::kLog);
+  CHECK(run_session(cfg, *make_backend("sim", cfg), opt, out).exit_code == ec::kOutput);
   std::filesystem::remove(path);
 
   // a bad LCM URL
   opt.log_path = "";
   opt.lcm_url = "nosuchprovider://x";
-  CHECK(hw::run_session(cfg, *made.backend, opt, out).exit_code == hw::exit_code::kBus);
+  CHECK(run_session(cfg, *make_backend("sim", cfg), opt, out).exit_code == ec::kBus);
 
   // --require-rt on a kernel without PREEMPT_RT
   if (!detect_rt().preempt_rt) {
     opt.lcm_url = "none";
     opt.realtime = true;
     opt.require_rt = true;
-    const auto rep = hw::run_session(cfg, *made.backend, opt, out);
-    CHECK(rep.exit_code == hw::exit_code::kRealtime);
+    const auto rep = run_session(cfg, *make_backend("sim", cfg), opt, out);
+    CHECK(rep.exit_code == ec::kRealtime);
     CHECK(rep.message.find("PREEMPT_RT") != std::string::npos);
   }
 }
 
 TEST_CASE("paced real-time run with the live bus (memq): timing statistics and health", "[session][realtime]") {
   const RtConfig cfg = shortened(4);
-  hw::RunOptions opt;
+  RunOptions opt;
   opt.realtime = true;
   opt.duration_s = 0.5;
   opt.lcm_url = "memq://";
@@ -322,7 +332,7 @@ TEST_CASE("paced real-time run with the live bus (memq): timing statistics and h
   const std::string path = tmp("paced");
   const auto rep = run(cfg, path, out, opt);
   INFO(out.str() << rep.summary());
-  CHECK(rep.exit_code == hw::exit_code::kOk);
+  CHECK(rep.exit_code == ec::kOk);
   CHECK(rep.stop_reason == StopReason::kDuration);
   CHECK(rep.cycles == 2000 + cfg.safety.shutdown_cycles);
   CHECK(rep.wall_s > 0.45);

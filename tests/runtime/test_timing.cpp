@@ -4,10 +4,11 @@
 #include <chrono>
 #include <thread>
 
-#include "manip/control/rt_thread.hpp"
-#include "manip/control/timing.hpp"
+#include "manip/runtime/rt_thread.hpp"
+#include "manip/runtime/timing.hpp"
 
 using namespace manip::control;
+using namespace manip::runtime;
 
 TEST_CASE("timing statistics: histogram percentiles and maxima", "[timing]") {
   TimingStats s;

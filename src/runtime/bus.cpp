@@ -1,4 +1,4 @@
-#include "manip/control/bus.hpp"
+#include "manip/runtime/bus.hpp"
 
 #include <lcm/lcm-cpp.hpp>
 
@@ -6,20 +6,21 @@
 #include <cmath>
 
 #include "manip/common/channels.hpp"
-#include "manip/control/messages.hpp"
-#include "manip/control/rt_thread.hpp"
+#include "manip/runtime/messages.hpp"
+#include "manip/runtime/rt_thread.hpp"
 
-namespace manip::control {
+namespace manip::runtime {
+using namespace manip::control;  // the loop's records and codes
 namespace {
 std::int64_t mono_ns() { return monotonic_ns(); }
 }  // namespace
 
 CommandLimits CommandLimits::from_config(const RtConfig& cfg) {
   CommandLimits l;
-  l.frame = cfg.frames;
+  l.frame = cfg.session.frame;
   l.wall_start_m = cfg.safety.wall_start_m;
   l.target_radius_m = cfg.protocol.target_radius_m;
-  l.trigger_x2_shoulder_m = cfg.perturbation.trigger_x2_shoulder_m;
+  l.trigger_x2_shoulder_m = cfg.session.perturbation.trigger_x2_shoulder_m;
   l.require_trigger_between = cfg.perturbed_count() > 0;
   return l;
 }
@@ -66,7 +67,7 @@ std::optional<manip::command_status_t> CommandGate::submit(const void* data, int
     cmd.kind = c.kind;
     cmd.start_shoulder_m = Vec2(c.start_shoulder_m[0], c.start_shoulder_m[1]);
     cmd.goal_shoulder_m = Vec2(c.goal_shoulder_m[0], c.goal_shoulder_m[1]);
-    if (q_.try_enqueue(cmd)) return std::nullopt;
+    if (q_.try_push(cmd)) return std::nullopt;
     r = Reject::kQueueFull;
   }
   ++rejected_;
@@ -118,14 +119,14 @@ void Bus::on_command(const void* data, int size) {
   auto rejected = gate_.submit(data, size, wall_clock_us(), mode);
   if (rejected) {
     publish(channels::kCommandStatus, *rejected);
-    if (links_.to_logger) links_.to_logger->enqueue(AuxRecord(*rejected));
+    if (links_.to_logger) links_.to_logger->push_growing(AuxRecord(*rejected));
   }
 }
 
 void Bus::drain_loop() {
   if (!links_.from_loop) return;
   LoopRecord r;
-  while (links_.from_loop->try_dequeue(r)) {
+  while (links_.from_loop->try_pop(r)) {
     if (const auto* s = std::get_if<manip::state_t>(&r)) {
       publish(channels::kStateLive, *s);
       ++published_states_;
@@ -160,7 +161,7 @@ void Bus::publish_health() {
     h.overruns = t.overruns;
   }
   publish(channels::kHealth, h);
-  if (links_.to_logger) links_.to_logger->enqueue(AuxRecord(h));
+  if (links_.to_logger) links_.to_logger->push_growing(AuxRecord(h));
 }
 
 void Bus::poll(int timeout_ms) {
@@ -179,4 +180,4 @@ void Bus::run(const std::atomic<bool>& stop) {
   publish_health();
 }
 
-}  // namespace manip::control
+}  // namespace manip::runtime

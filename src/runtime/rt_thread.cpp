@@ -1,4 +1,4 @@
-#include "manip/control/rt_thread.hpp"
+#include "manip/runtime/rt_thread.hpp"
 
 #include <pthread.h>
 #include <sched.h>
@@ -13,7 +13,7 @@
 #include <fstream>
 #include <thread>
 
-namespace manip::control {
+namespace manip::runtime {
 std::int64_t monotonic_ns() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -109,6 +109,14 @@ bool configure_rt_thread(const RtThreadOptions& o, std::string& err) {
   return ok;
 }
 
+bool setup_rt_loop_thread(const RtThreadOptions& o, std::string& err) {
+  std::string mlock_err;
+  const bool locked = lock_memory(mlock_err);
+  const bool fifo = configure_rt_thread(o, err);
+  if (!locked) err += (err.empty() ? "" : "; ") + mlock_err;
+  return locked && fifo;
+}
+
 std::int64_t run_paced(CycleBody& body, const PacedOptions& o, TimingStats& stats) {
   const std::int64_t period = o.period_ns;
   std::int64_t deadline = now_ns() + period;
@@ -160,4 +168,4 @@ std::int64_t run_as_fast_as_possible(CycleBody& body, TimingStats& stats, const 
   return cycle;
 }
 
-}  // namespace manip::control
+}  // namespace manip::runtime
