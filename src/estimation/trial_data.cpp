@@ -1,11 +1,20 @@
 #include "manip/estimation/trial_data.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 namespace manip::estimation {
 namespace {
 Vec2 v2(const double a[2]) { return Vec2(a[0], a[1]); }
 bool finite2(const double a[2]) { return std::isfinite(a[0]) && std::isfinite(a[1]); }
+// a - b without overflow (cycles come from untrusted bytes; INT64_MIN/MAX
+// must give a wrong-but-defined answer, never undefined behaviour).
+std::int64_t sub_sat(std::int64_t a, std::int64_t b) {
+  std::int64_t r = 0;
+  if (__builtin_sub_overflow(a, b, &r)) return a > b ? INT64_MAX : INT64_MIN;
+  return r;
+}
 }  // namespace
 
 SessionInfo session_info_from(const manip::session_t& m) {
@@ -59,9 +68,89 @@ void TrialAssembler::drop(const std::string& reason) {
   }
 }
 
+namespace {
+// Release order within one cycle: a trial's START (and ONSET) come before the
+// cycle's state, the truth of the cycle after it, END/ABORT last, so that the
+// START cycle is the trial's first sample and the END cycle its last.
+constexpr int kRankStart = 0, kRankOnset = 1, kRankState = 2, kRankTwin = 3, kRankTruth = 4, kRankEnd = 5;
+}  // namespace
+
+void TrialAssembler::hold(Pending&& p) {
+  p.seq = seq_++;
+  // Later than what was already released: nothing can be put before it any
+  // more; process it now (the checks below then report it as out of order).
+  if (released_any_ && (p.cycle < released_cycle_ || (p.cycle == released_cycle_ && p.rank < released_rank_))) {
+    process(p);
+    return;
+  }
+  // States arrive in cycle order, so this is nearly always a push_back.
+  auto before = [](const Pending& a, const Pending& b) {
+    return a.cycle != b.cycle ? a.cycle < b.cycle : a.rank < b.rank;
+  };
+  if (pending_.empty() || !before(p, pending_.back())) {
+    pending_.push_back(std::move(p));
+  } else {
+    const auto it = std::upper_bound(pending_.begin(), pending_.end(), p, before);
+    pending_.insert(it, std::move(p));
+  }
+}
+
+void TrialAssembler::release_until(std::int64_t horizon_cycle) {
+  const std::size_t cap = kMaxPendingFactor * static_cast<std::size_t>(tolerance_) + 64;
+  while (!pending_.empty() &&
+         (sub_sat(horizon_cycle, pending_.front().cycle) > tolerance_ || pending_.size() > cap)) {
+    const Pending p = std::move(pending_.front());
+    pending_.pop_front();
+    released_any_ = true;
+    released_cycle_ = p.cycle;
+    released_rank_ = p.rank;
+    process(p);
+  }
+}
+
+void TrialAssembler::process(const Pending& p) {
+  if (const auto* s = std::get_if<manip::state_t>(&p.msg)) {
+    if (p.twin)
+      do_truth_state(*s);
+    else
+      do_state(*s);
+  } else if (const auto* e = std::get_if<manip::trial_event_t>(&p.msg)) {
+    do_trial_event(*e);
+  } else {
+    do_truth_impedance(std::get<manip::impedance_truth_t>(p.msg));
+  }
+}
+
 void TrialAssembler::on_state(const manip::state_t& s) {
   ++states_;
-  if (last_cycle_ >= 0 && s.cycle != last_cycle_ + 1) {
+  latest_cycle_ = s.cycle;
+  hold(Pending{s.cycle, kRankState, 0, false, s});
+  // Only states move the window: their counter is what the log guarantees
+  // (gapless, increasing); an event's cycle may be anything.
+  release_until(s.cycle);
+}
+
+void TrialAssembler::on_truth_state(const manip::state_t& s) {
+  latest_cycle_ = std::max(latest_cycle_, s.cycle);
+  hold(Pending{s.cycle, kRankTwin, 0, true, s});
+}
+
+void TrialAssembler::on_truth_impedance(const manip::impedance_truth_t& t) {
+  // No cycle of its own: it belongs with the messages that arrived before it.
+  hold(Pending{latest_cycle_, kRankTruth, 0, false, t});
+}
+
+void TrialAssembler::on_trial_event(const manip::trial_event_t& e) {
+  // Checked on arrival, so that the error points at this event.
+  if (!has_session_) throw std::runtime_error("no session message before the first trial event (not a manip session log?)");
+  int rank = kRankOnset;
+  if (e.kind == manip::trial_event_t::START) rank = kRankStart;
+  if (e.kind == manip::trial_event_t::END || e.kind == manip::trial_event_t::ABORT) rank = kRankEnd;
+  hold(Pending{e.cycle, rank, 0, false, e});
+}
+
+void TrialAssembler::do_state(const manip::state_t& s) {
+  if (last_cycle_ >= 0 && sub_sat(s.cycle, last_cycle_) != 1) {
     ++gaps_;
     if (in_trial_)
       drop("gap in the cycle counter (" + std::to_string(last_cycle_) + " -> " + std::to_string(s.cycle) + ")");
@@ -73,9 +162,10 @@ void TrialAssembler::on_state(const manip::state_t& s) {
     drop("non-finite sample at cycle " + std::to_string(s.cycle));
     return;
   }
-  const auto idx = s.cycle - cur_.start_cycle;
+  const auto idx = sub_sat(s.cycle, cur_.start_cycle);
   if (idx != static_cast<std::int64_t>(cur_.x_m.size())) {
-    drop("state cycle " + std::to_string(s.cycle) + " out of sequence");
+    drop("state cycle " + std::to_string(s.cycle) + " out of sequence (expected cycle " +
+         std::to_string(cur_.start_cycle + static_cast<std::int64_t>(cur_.x_m.size())) + ")");
     return;
   }
   // Same arithmetic as WorkspaceToShoulder::point_to_shoulder / vector_to_shoulder.
@@ -89,9 +179,9 @@ void TrialAssembler::on_state(const manip::state_t& s) {
   cur_.xdd_ref_m.push_back(rot_ * v2(s.xdd_ref_workspace_mps2));
 }
 
-void TrialAssembler::on_truth_state(const manip::state_t& s) {
+void TrialAssembler::do_truth_state(const manip::state_t& s) {
   if (!in_trial_ || s.trial != cur_.trial || !has_session_) return;
-  const auto idx = s.cycle - cur_.start_cycle;
+  const auto idx = sub_sat(s.cycle, cur_.start_cycle);
   if (idx != static_cast<std::int64_t>(cur_.x_twin_m.size())) return;  // misaligned twin: ignore it
   if (cur_.x_twin_m.empty()) {
     cur_.x_twin_m.reserve(cur_.x_m.capacity());
@@ -103,7 +193,7 @@ void TrialAssembler::on_truth_state(const manip::state_t& s) {
   cur_.xdd_twin_m.push_back(rot_ * v2(s.xdd_ref_workspace_mps2));
 }
 
-void TrialAssembler::on_truth_impedance(const manip::impedance_truth_t& t) {
+void TrialAssembler::do_truth_impedance(const manip::impedance_truth_t& t) {
   if (!in_trial_ || t.trial != cur_.trial) return;
   cur_.has_truth = true;
   cur_.truth_m_kg << t.m_kg[0], t.m_kg[1], t.m_kg[2], t.m_kg[3];
@@ -112,14 +202,7 @@ void TrialAssembler::on_truth_impedance(const manip::impedance_truth_t& t) {
   cur_.truth_model = t.model;
 }
 
-void TrialAssembler::on_trial_event(const manip::trial_event_t& e) {
-  if (!has_session_) {
-    if (!warned_no_session_) {
-      warned_no_session_ = true;
-      throw std::runtime_error("no session message before the first trial event (not a manip session log?)");
-    }
-    return;
-  }
+void TrialAssembler::do_trial_event(const manip::trial_event_t& e) {
   switch (e.kind) {
     case manip::trial_event_t::START:
       if (in_trial_) issues_.push_back({cur_.trial, "no END/ABORT before trial " + std::to_string(e.trial) + " started"});
@@ -143,11 +226,17 @@ void TrialAssembler::on_trial_event(const manip::trial_event_t& e) {
       in_trial_ = true;
       bad_ = false;
       bad_reason_.clear();
+      // The state of the START cycle was already released: this START came
+      // later than the reorder window allows, and its first samples are gone.
+      if (last_cycle_ >= e.cycle)
+        drop("START event (cycle " + std::to_string(e.cycle) + ") arrived after the state of cycle " +
+             std::to_string(last_cycle_) + ", more than the reorder tolerance of " + std::to_string(tolerance_) +
+             " cycles late");
       break;
     case manip::trial_event_t::ONSET:
       if (in_trial_ && e.trial == cur_.trial) {
         if (cur_.onset_index >= 0) drop("second ONSET event in the trial");
-        cur_.onset_index = e.cycle - cur_.start_cycle;
+        cur_.onset_index = sub_sat(e.cycle, cur_.start_cycle);
         cur_.angle_rad = e.pert_angle_rad;
         cur_.amplitude_n = e.pert_amplitude_n;
       }
@@ -159,6 +248,15 @@ void TrialAssembler::on_trial_event(const manip::trial_event_t& e) {
         break;
       }
       in_trial_ = false;
+      // The trial ends at the END cycle: drop samples a writer labelled with
+      // the trial after it (only possible when the END came late).
+      const auto end_index = sub_sat(e.cycle, cur_.start_cycle);  // index of the END cycle
+      if (end_index >= 0 && end_index < INT64_MAX && static_cast<std::int64_t>(cur_.x_m.size()) > end_index + 1) {
+        const auto n = static_cast<std::size_t>(end_index + 1);
+        for (auto* v : {&cur_.x_m, &cur_.f_sensor_n, &cur_.u_pert_n, &cur_.x_ref_m, &cur_.xd_ref_m, &cur_.xdd_ref_m,
+                        &cur_.x_twin_m, &cur_.xd_twin_m, &cur_.xdd_twin_m})
+          if (v->size() > n) v->resize(n);
+      }
       if (!cur_.x_m.empty()) last_size_ = cur_.x_m.size();
       if (e.kind == manip::trial_event_t::ABORT) {
         issues_.push_back({cur_.trial, "aborted (" + e.reason + ")"});
@@ -190,6 +288,14 @@ void TrialAssembler::on_trial_event(const manip::trial_event_t& e) {
 }
 
 void TrialAssembler::finish() {
+  while (!pending_.empty()) {
+    const Pending p = std::move(pending_.front());
+    pending_.pop_front();
+    released_any_ = true;
+    released_cycle_ = p.cycle;
+    released_rank_ = p.rank;
+    process(p);
+  }
   if (in_trial_) issues_.push_back({cur_.trial, "log ends inside the trial (no END event)"});
   in_trial_ = false;
 }

@@ -47,16 +47,13 @@ void LogWritingHandler::close() {
 
 namespace {
 
-template <class Msg, class Fn>
-bool dispatch(const RawEvent& ev, Msg& msg, LogReadSummary& sum, SessionHandler& h, Fn&& fn) {
-  if (!decode(ev, msg)) {
-    ++sum.undecodable;
-    h.on_warning("byte " + std::to_string(ev.offset) + ": event on " + std::string(ev.channel) +
-                 " does not decode as manip type (schema mismatch or corruption); skipped");
-    return false;
-  }
-  fn(msg);
-  return true;
+const char* type_name(const manip::state_t*) { return "manip.state_t"; }
+const char* type_name(const manip::trial_event_t*) { return "manip.trial_event_t"; }
+const char* type_name(const manip::fault_t*) { return "manip.fault_t"; }
+const char* type_name(const manip::impedance_truth_t*) { return "manip.impedance_truth_t"; }
+
+std::string where(const std::string& path, const RawEvent& ev) {
+  return path + ": byte " + std::to_string(ev.offset) + " (" + std::string(ev.channel) + ")";
 }
 
 }  // namespace
@@ -70,26 +67,53 @@ LogReadSummary read_log(const std::string& path, SessionHandler& handler) {
   manip::trial_event_t event;
   manip::fault_t fault;
   manip::impedance_truth_t truth;
+  bool session_seen = false;
+  std::string bad_session;  // why an undecodable session message was skipped, for later errors
   std::size_t reported_skips = 0;
   auto report_skips = [&]() {
     const auto& d = reader.diagnostics();
     for (; reported_skips < d.skipped.size(); ++reported_skips) {
       const auto& s = d.skipped[reported_skips];
-      handler.on_warning(path + ": skipped " + std::to_string(s.bytes) + " bytes of garbage at byte " +
-                         std::to_string(s.offset) + " (resynchronised on the next event)");
+      handler.on_warning(path + ": skipped " + std::to_string(s.bytes) + " bytes at byte " + std::to_string(s.offset) +
+                         " (" + s.why + "); resynchronised on the next event at byte " +
+                         std::to_string(s.offset + s.bytes));
+    }
+  };
+  // Every payload is untrusted: decoded with safe_decode, a bad one is a
+  // warning naming file, offset, channel and field, and reading continues.
+  auto decoded = [&](auto& msg) {
+    const DecodeResult r = safe_decode(ev.data, msg);
+    if (r.ok()) return true;
+    ++sum.undecodable;
+    handler.on_warning(where(path, ev) + ": event does not decode as " + type_name(&msg) + " (" + r.message() +
+                       "); skipped");
+    return false;
+  };
+  // Handlers (e.g. the trial assembler) throw on input they cannot use at all;
+  // say where in which file that happened.
+  auto call = [&](auto&& fn) {
+    try {
+      fn();
+    } catch (const std::exception& e) {
+      const std::string what = e.what();
+      if (what.rfind(path, 0) == 0) throw;  // already names the file
+      std::string msg = where(path, ev) + ": " + what;
+      if (!bad_session.empty()) msg += " (" + bad_session + ")";
+      throw std::runtime_error(msg);
     }
   };
   while (reader.next(ev)) {
     report_skips();
     const std::string_view ch = ev.channel;
     if (ch == channels::kState) {
-      dispatch(ev, state, sum, handler, [&](const auto& m) { handler.on_state(m); });
+      if (decoded(state)) call([&] { handler.on_state(state); });
     } else if (ch == channels::kTrial) {
-      dispatch(ev, event, sum, handler, [&](const auto& m) { handler.on_trial_event(m); });
+      if (decoded(event)) call([&] { handler.on_trial_event(event); });
     } else if (ch == channels::kSession) {
-      // A session_t of another schema version has another fingerprint: peek at
-      // the version field (right after the 8-byte fingerprint) to name it.
-      if (!decode(ev, session)) {
+      const DecodeResult r = safe_decode(ev.data, session);
+      if (r.status == DecodeStatus::wrong_type) {
+        // A session_t of another schema version has another fingerprint: peek
+        // at the version field (right after the 8-byte fingerprint) to name it.
         if (ev.data.size() >= 12) {
           const auto* p = ev.data.data() + 8;
           const std::int32_t v = static_cast<std::int32_t>((std::uint32_t(p[0]) << 24) | (std::uint32_t(p[1]) << 16) |
@@ -99,27 +123,36 @@ LogReadSummary read_log(const std::string& path, SessionHandler& handler) {
                                      ", this build reads version " +
                                      std::to_string(manip::session_t::SCHEMA_VERSION));
         }
-        throw std::runtime_error(path + ": session message at byte " + std::to_string(ev.offset) +
-                                 " does not decode (not a manip log of schema version " +
+        throw std::runtime_error(where(path, ev) + ": session message does not decode (not a manip log of schema version " +
                                  std::to_string(manip::session_t::SCHEMA_VERSION) + ")");
+      }
+      if (!r.ok()) {
+        // Damaged, not foreign: report it and read on (the handler decides
+        // whether a log without a usable session message is of any use).
+        ++sum.undecodable;
+        bad_session = "the session message at byte " + std::to_string(ev.offset) + " was damaged: " + r.message();
+        handler.on_warning(where(path, ev) + ": session message does not decode (" + r.message() + "); skipped");
+        continue;
       }
       if (session.schema_version != manip::session_t::SCHEMA_VERSION)
         throw std::runtime_error(path + ": log written with manip schema version " +
                                  std::to_string(session.schema_version) + ", this build reads version " +
                                  std::to_string(manip::session_t::SCHEMA_VERSION));
-      handler.on_session(session);
+      session_seen = true;
+      call([&] { handler.on_session(session); });
     } else if (ch == channels::kTruthState) {
-      dispatch(ev, state, sum, handler, [&](const auto& m) { handler.on_truth_state(m); });
+      if (decoded(state)) call([&] { handler.on_truth_state(state); });
     } else if (ch == channels::kTruthImpedance) {
-      dispatch(ev, truth, sum, handler, [&](const auto& m) { handler.on_truth_impedance(m); });
+      if (decoded(truth)) call([&] { handler.on_truth_impedance(truth); });
     } else if (ch == channels::kFault) {
-      dispatch(ev, fault, sum, handler, [&](const auto& m) { handler.on_fault(m); });
+      if (decoded(fault)) call([&] { handler.on_fault(fault); });
     } else {
       ++sum.unknown_channels;
     }
   }
   report_skips();
   sum.diagnostics = reader.diagnostics();
+  sum.session_seen = session_seen;
   if (sum.diagnostics.truncated_tail)
     handler.on_warning(path + ": last event at byte " + std::to_string(sum.diagnostics.truncated_offset) +
                        " is truncated (file cut short); ignored");

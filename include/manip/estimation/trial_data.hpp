@@ -4,9 +4,11 @@
 // converted once from the workspace frame of the log to the shoulder frame of
 // the arm (common/frames.hpp).
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <stdexcept>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "manip/common/frames.hpp"
@@ -60,12 +62,29 @@ struct TrialIssue {
 };
 
 // Builds trials from a message stream and hands each complete trial to a
-// callback as soon as its END arrives, so a session of any length is
-// processed in bounded memory. Checks: session message first, gapless cycle
-// counter within a trial, finite samples, onset inside the trial.
+// callback as soon as its END has been put in order, so a session of any
+// length is processed in bounded memory. Checks: session message first,
+// gapless cycle counter within a trial, finite samples, onset inside the
+// trial.
+//
+// Trials are assembled by the `cycle` each message carries, not by arrival
+// order: messages are held in a reorder window and released in the order
+// (cycle; within one cycle START, ONSET, the state, the truth twin state, the
+// truth impedance, END/ABORT). So a writer may emit a trial event up to
+// reorder_tolerance_cycles() cycles before or after the state of its cycle
+// (e.g. START just after the trial's first state, END just before its last):
+// the contract is in docs/schema.md ("Event order"). A message later than
+// that is processed when it arrives and reported as out of order. Memory: at
+// most kMaxPendingFactor x tolerance messages are held.
 class TrialAssembler final : public logging::SessionHandler {
  public:
   using TrialCallback = std::function<void(const SessionInfo&, TrialData&&)>;
+  // 0.1 s at 4 kHz: far more than any writer's skew between its state and
+  // trial-event streams (a cycle for a third-party writer, a few ms for a bus
+  // logger), small enough to hold in memory (~100 kB).
+  static constexpr std::int64_t kDefaultReorderCycles = 400;
+  static constexpr std::size_t kMaxPendingFactor = 8;
+
   explicit TrialAssembler(TrialCallback cb) : cb_(std::move(cb)) {}
 
   void on_session(const manip::session_t& msg) override;
@@ -79,8 +98,13 @@ class TrialAssembler final : public logging::SessionHandler {
   // nothing else of them: they only feed the PSD), which saves most of the
   // copying and memory of reading a session. Checks are unchanged. Default true.
   void set_keep_unperturbed_signals(bool keep) { keep_unperturbed_signals_ = keep; }
+  // Set before the first message; >= 0 (0: every message must be in order).
+  void set_reorder_tolerance_cycles(std::int64_t cycles) { tolerance_ = cycles < 0 ? 0 : cycles; }
+  [[nodiscard]] std::int64_t reorder_tolerance_cycles() const { return tolerance_; }
 
-  // Call after the stream ended: reports a trial left open.
+  // Call after the stream ended: releases the messages still held in the
+  // reorder window (the last trial's END among them) and reports a trial
+  // left open. Required: without it the last trial is never handed over.
   void finish();
 
   [[nodiscard]] bool has_session() const { return has_session_; }
@@ -91,7 +115,23 @@ class TrialAssembler final : public logging::SessionHandler {
   [[nodiscard]] std::int64_t cycle_gaps() const { return gaps_; }
 
  private:
+  // A message held in the reorder window, keyed by (cycle, rank, arrival).
+  struct Pending {
+    std::int64_t cycle{0};
+    int rank{0};
+    std::uint64_t seq{0};
+    bool twin{false};  // a state_t from the truth channel
+    std::variant<manip::state_t, manip::trial_event_t, manip::impedance_truth_t> msg;
+  };
+  void hold(Pending&& p);
+  void release_until(std::int64_t horizon_cycle);
+  void process(const Pending& p);
+  void do_state(const manip::state_t& msg);
+  void do_trial_event(const manip::trial_event_t& msg);
+  void do_truth_state(const manip::state_t& msg);
+  void do_truth_impedance(const manip::impedance_truth_t& msg);
   void drop(const std::string& reason);
+
   TrialCallback cb_;
   SessionInfo info_;
   // info_.frame's rotation, evaluated once: it was a sin and a cos per
@@ -101,18 +141,23 @@ class TrialAssembler final : public logging::SessionHandler {
   bool keep_all_{true};  // of the current trial
   std::size_t last_size_{0};  // samples of the previous trial, to reserve the next one
   bool has_session_{false};
-  bool warned_no_session_{false};
   bool in_trial_{false};
   bool bad_{false};
   std::string bad_reason_;
   TrialData cur_;
-  std::int64_t last_cycle_{-1};
+  std::int64_t last_cycle_{-1};  // cycle of the last state released
   std::int64_t states_{0};
   std::int64_t gaps_{0};
   std::vector<TrialIssue> issues_;
   std::vector<std::string> warnings_;
-  // Truth arrives after the trial's states; keep the last handed-over trial's
-  // truth? No: the runner emits twin + truth before END, so both are in cur_.
+  // Reorder window.
+  std::int64_t tolerance_{kDefaultReorderCycles};
+  std::deque<Pending> pending_;
+  std::uint64_t seq_{0};
+  bool released_any_{false};
+  std::int64_t released_cycle_{0};  // key of the last message released in order
+  int released_rank_{0};
+  std::int64_t latest_cycle_{0};  // cycle of the last state or twin to arrive (for the truth impedance)
 };
 
 }  // namespace manip::estimation

@@ -1,12 +1,14 @@
 #pragma once
 // LCM event-log files (the format of lcm-logger and lcm::LogFile), read and
 // written without going through lcm::LogFile:
-//  - the reader streams (bounded memory however long the log), and, unlike the
-//    stock reader, survives garbage in the middle (resynchronises on the next
-//    event magic and reports the bytes skipped) and a truncated last event;
+//  - the reader streams (bounded memory however long the log) and never
+//    trusts a length field: an event is accepted only if its declared end is
+//    followed by another event (or is the end of the file); anything else is
+//    resynchronised over byte by byte and reported (offset, bytes, why);
 //  - the writer reports errors (e.g. a full disk) as values, never silently.
 // Event layout (big endian): u32 magic 0xEDA1DA01, i64 event number,
 // i64 timestamp [us], i32 channel length, i32 data length, channel, data.
+// The framing rules are written down in docs/schema.md ("Reading damaged logs").
 #include <cstdint>
 #include <cstdio>
 #include <span>
@@ -14,9 +16,12 @@
 #include <string_view>
 #include <vector>
 
+#include "manip/logging/safe_decode.hpp"
+
 namespace manip::logging {
 
 inline constexpr std::uint32_t kEventMagic = 0xEDA1DA01u;
+inline constexpr std::size_t kEventHeaderBytes = 4 + 8 + 8 + 4 + 4;
 
 struct RawEvent {
   std::int64_t event_number{};
@@ -29,20 +34,51 @@ struct RawEvent {
 struct SkippedRegion {
   std::uint64_t offset{};  // first byte skipped
   std::uint64_t bytes{};
+  std::string why;         // e.g. "no event magic", "event at byte N declares ... (corrupted length)"
 };
 
 struct ReadDiagnostics {
-  std::vector<SkippedRegion> skipped;  // garbage regions resynchronised over
+  std::vector<SkippedRegion> skipped;  // regions resynchronised over, in file order
   std::uint64_t bytes_skipped{};
   bool truncated_tail{false};          // last event cut short (reported, not decoded)
   std::uint64_t truncated_offset{};
   std::uint64_t events{};
+  std::uint64_t largest_event_bytes{};  // header + channel + data of the largest accepted event
 };
 
+// Reads a log file as it is when opened (its size is taken at open).
+//
+// Framing (what is accepted as an event at offset p):
+//  - magic at p, channel length 1..kMaxChannelBytes of bytes without control
+//    characters, data length 0..kMaxDataBytes, and the whole event inside the
+//    file (lengths are bounded by the bytes left, never trusted beyond them);
+//  - its end is the end of the file or another magic with plausible lengths;
+//  - exception, so that garbage *after* a good event does not cost that
+//    event: an event starting where the previous one ended (or at byte 0)
+//    whose end is followed by garbage is still accepted if no valid event
+//    starts inside its declared span (otherwise its length is corrupt: it is
+//    skipped and reading resumes at that inner event).
+// Everything else is skipped up to the next offset that passes these rules
+// and reported in diagnostics().skipped. A "truncated last event" is reported
+// only when no valid event follows it anywhere in the file.
+//
+// Allocation bound: the read buffer is the only allocation that grows with
+// the input. It holds max(kMinBufferBytes, E + kReadAheadBytes) bytes, where
+// E is the size of the largest event accepted so far (E <= kEventHeaderBytes
+// + kMaxChannelBytes + kMaxDataBytes, and E <= the file size). A declared
+// length is never allocated before the event passed the framing checks,
+// which read only the 28-byte header, the channel and the next header.
+// buffer_bytes() reports the buffer's size (it never shrinks, so it is the
+// peak).
 class EventLogReader {
  public:
-  // Throws std::runtime_error("<path>: ...") if the file cannot be opened or
-  // does not start with an LCM event (not an LCM log).
+  static constexpr std::int32_t kMaxChannelBytes = 1024;
+  static constexpr std::int64_t kMaxDataBytes = std::int64_t{256} << 20;
+  static constexpr std::size_t kReadAheadBytes = std::size_t{1} << 20;
+  static constexpr std::size_t kMinBufferBytes = std::size_t{2} << 20;
+
+  // Throws std::runtime_error("<path>: ...") if the file cannot be opened, is
+  // not a regular file, or does not start with an LCM event (not an LCM log).
   explicit EventLogReader(const std::string& path);
   ~EventLogReader();
   EventLogReader(const EventLogReader&) = delete;
@@ -53,16 +89,32 @@ class EventLogReader {
   [[nodiscard]] const ReadDiagnostics& diagnostics() const { return diag_; }
   [[nodiscard]] const std::string& path() const { return path_; }
   [[nodiscard]] std::uint64_t file_size() const { return file_size_; }
+  [[nodiscard]] std::size_t buffer_bytes() const { return buf_.size(); }
 
  private:
-  bool fill(std::size_t need);  // ensure `need` bytes from pos_ are buffered
+  enum class Frame { ok, no_magic, bad_header, beyond_eof };
+  struct Header {
+    std::int64_t event_number{}, utime{};
+    std::uint64_t total{};  // header + channel + data
+  };
+  struct Scan {
+    std::uint64_t next;         // first valid event at or after `from`, or `limit` if none
+    std::uint64_t beyond_eof;   // first magic with plausible lengths that runs past the end, or UINT64_MAX
+  };
+  Frame parse_header(std::uint64_t off, Header& h) const;
+  [[nodiscard]] bool followed_by_event(std::uint64_t end) const;
+  Scan scan(std::uint64_t from, std::uint64_t limit);
+  void skip(std::uint64_t from, std::uint64_t to, std::string why);
+  bool peek(std::uint64_t off, std::uint8_t* out, std::size_t n) const;  // copy without moving the window
+  const std::uint8_t* view(std::uint64_t off, std::size_t n);            // window over [off, off + n)
+
   std::string path_;
-  std::FILE* f_{nullptr};
-  std::vector<std::uint8_t> buf_;
-  std::size_t begin_{0}, end_{0};  // valid bytes buf_[begin_, end_)
-  std::uint64_t buf_offset_{0};    // file offset of buf_[0]
+  int fd_{-1};
   std::uint64_t file_size_{0};
-  bool eof_{false};
+  std::uint64_t pos_{0};  // next byte to examine
+  std::vector<std::uint8_t> buf_;
+  std::uint64_t win_off_{0};  // file offset of buf_[0]
+  std::size_t win_len_{0};    // valid bytes in buf_
   ReadDiagnostics diag_;
 };
 
@@ -105,11 +157,11 @@ class EventLogWriter {
   std::vector<char> iobuf_;
 };
 
-// Decode an lcm-gen message from an event; false if the payload does not
-// decode as Msg (wrong fingerprint or short data).
+// Decode a manip message from an event through safe_decode (never throws,
+// never trusts a length field); false if the payload does not decode as Msg.
 template <class Msg>
 bool decode(const RawEvent& ev, Msg& out) {
-  return out.decode(ev.data.data(), 0, static_cast<int>(ev.data.size())) == static_cast<int>(ev.data.size());
+  return safe_decode(ev.data, out).ok();
 }
 
 }  // namespace manip::logging

@@ -52,13 +52,18 @@ struct LogReadSummary {
   ReadDiagnostics diagnostics;
   std::uint64_t undecodable{0};       // events on manip channels that failed to decode
   std::uint64_t unknown_channels{0};  // events on other channels (ignored)
+  bool session_seen{false};           // a decodable session message was handed to the handler
 };
 
 // Streams a log into a handler. Throws std::runtime_error (message names the
 // file) if the file cannot be opened, is not an LCM log, or its session
 // message has a schema version this build does not know. Damage inside the
-// file (garbage, truncated tail, undecodable events) is reported through
-// handler.on_warning with byte offsets, and reading continues.
+// file (garbage, corrupted length fields, truncated tail, undecodable events
+// including a damaged session message) is reported through handler.on_warning
+// as "<file>: byte <offset> (<channel>): ...", and reading continues. Every
+// payload is decoded with safe_decode (safe_decode.hpp). An exception thrown
+// by the handler is rethrown as std::runtime_error prefixed with the file,
+// the byte offset and the channel of the event being handled.
 LogReadSummary read_log(const std::string& path, SessionHandler& handler);
 
 }  // namespace manip::logging
