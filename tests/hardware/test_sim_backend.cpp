@@ -150,7 +150,7 @@ TEST_CASE("rendering error: controller + sim stages vs the ideal admittance, sam
   auto ideal = [&](bool perturb, std::vector<Vec2>& x) {
     auto h = hw::make_sim_human(cfg);  // sample rate = fs * substeps
     h->begin_trial(reach, 99);
-    manip::sim::AdmittanceParams ap;
+    manip::sim::PlantParams ap;
     ap.m_adm_kg = cfg.admittance.m_adm_kg.asDiagonal();
     ap.d_adm_nspm = cfg.admittance.d_adm_nspm.asDiagonal();
     ap.m_handle_kg = cfg.handle_mass_kg.asDiagonal();
