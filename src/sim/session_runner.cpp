@@ -12,15 +12,10 @@
 namespace manip::sim {
 namespace {
 
-// Independent streams from one session seed: SplitMix64 of a combined key, so
-// each consumer (reach design, sensor noise, per-trial human noise) draws from
-// its own PortableRng and adding a draw in one does not shift the others.
-std::uint64_t mix(std::uint64_t a, std::uint64_t b) {
-  std::uint64_t z = a * 0x9E3779B97F4A7C15ull + b + 0x632BE59BD9B4E019ull;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
+// Independent streams from one session seed: the first PortableRng draw of a
+// combined key, so each consumer (reach design, sensor noise, per-trial human
+// noise) has its own generator and a draw added in one does not shift the others.
+std::uint64_t mix(std::uint64_t a, std::uint64_t b) { return PortableRng(a * 0x9E3779B97F4A7C15ull + b).next(); }
 
 void copy2(double dst[2], const Vec2& v) {
   dst[0] = v.x();
