@@ -83,7 +83,7 @@ int main(int argc, char** argv) {
         d.write_twins = false;
         auto hp = truth_p;
         sim::apply_noise(sim::parse_noise_level(noise), d, hp);
-        hp.sample_rate_hz = d.sample_rate_hz * d.substeps;
+        hp.sample_rate_hz = d.session.sample_rate_hz * d.substeps;
         sim::LinearImpedanceHuman human(hp);
         estimation::EstimatorSettings es;
         es.methods = methods == "all" ? estimation::all_methods() : split(methods);
