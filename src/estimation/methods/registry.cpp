@@ -11,7 +11,8 @@ namespace manip::estimation {
   X(paper)                       \
   X(paper_pooled)                \
   X(oe)                          \
-  X(oe_trial)
+  X(oe_trial)                    \
+  /* a new method: one line X(name) \ above this one */
 
 #define MANIP_DECLARE(name) std::unique_ptr<Method> make_##name##_method();
 MANIP_BUILTIN_METHODS(MANIP_DECLARE)
