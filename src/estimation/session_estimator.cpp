@@ -18,8 +18,6 @@
 namespace manip::estimation {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
 double to_deg(double rad) {
   double d = std::fmod(rad * 180.0 / std::numbers::pi, 360.0);
   if (d < 0) d += 360.0;
