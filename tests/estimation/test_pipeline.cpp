@@ -18,7 +18,7 @@ Report estimate(const testutil::MemorySession& ms, std::vector<std::string> meth
 }
 const Summary& session_summary(const Report& r, const std::string& m) {
   for (const auto& s : r.summaries)
-    if (s.method == m && s.group == "session") return s;
+    if (s.method == m && s.group.is_session()) return s;
   throw std::runtime_error("no summary for " + m);
 }
 }  // namespace
@@ -55,7 +55,7 @@ TEST_CASE("pipeline: noise-free linear person, pooled methods within 5% (K) and 
   for (const char* m : {"pem", "oe"}) {
     int angles = 0;
     for (const auto& s : r.summaries)
-      if (s.method == m && s.group.rfind("angle", 0) == 0) ++angles;
+      if (s.method == m && s.group.is_angle()) ++angles;
     CHECK(angles == 8);
   }
 }

@@ -33,7 +33,7 @@ std::string tmp(const char* n) {
 
 const manip::estimation::Summary* session_summary(const manip::estimation::Report& r, const std::string& method) {
   for (const auto& s : r.summaries)
-    if (s.method == method && s.group == "session") return &s;
+    if (s.method == method && s.group.is_session()) return &s;
   return nullptr;
 }
 
