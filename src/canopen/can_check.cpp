@@ -17,7 +17,8 @@ SimDriveParams sim_params_for(const DriveConfig& d) {
   return p;
 }
 
-VirtualRig::VirtualRig(const CanConfig& cfg, int64_t step_us) : step_us_(step_us) {
+VirtualRig::VirtualRig(const CanConfig& cfg, int64_t step_us, const std::function<void(SimDriveParams&)>& tweak)
+    : step_us_(step_us) {
   for (const auto& b : cfg.buses) {
     buses_.push_back(std::make_unique<VirtualBus>(b.bitrate));
     master_eps_.push_back(&buses_.back()->attach());
@@ -25,12 +26,13 @@ VirtualRig::VirtualRig(const CanConfig& cfg, int64_t step_us) : step_us_(step_us
   for (const auto& d : cfg.drives) {
     for (std::size_t b = 0; b < cfg.buses.size(); ++b) {
       if (cfg.buses[b].name != d.bus) continue;
-      drives_.push_back(std::make_unique<SimulatedDrive>(sim_params_for(d)));
+      SimDriveParams p = sim_params_for(d);
+      if (tweak) tweak(p);
+      drives_.push_back(std::make_unique<SimulatedDrive>(p));
       drive_eps_.push_back(&buses_[b]->attach());
       drive_bus_.push_back(d.bus);
     }
   }
-  drive_bus_.reserve(drive_bus_.size());
 }
 
 SimulatedDrive& VirtualRig::add_drive(std::size_t bus, const SimDriveParams& p) {

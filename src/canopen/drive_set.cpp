@@ -4,6 +4,7 @@ namespace manip::canopen {
 
 CanDriveSet::CanDriveSet(const CanConfig& cfg, std::vector<CanPort*> ports) : cfg_(cfg), ports_(std::move(ports)) {
   for (const auto& b : cfg_.buses) masters_.push_back(std::make_unique<Master>(cfg_, b.name));
+  tx_.resize(masters_.size());
   for (std::size_t b = 0; b < masters_.size(); ++b) {
     for (std::size_t s = 0; s < masters_[b]->node_count(); ++s) {
       const DriveConfig& d = masters_[b]->drive(s);
@@ -18,10 +19,29 @@ CanDriveSet::CanDriveSet(const CanConfig& cfg, std::vector<CanPort*> ports) : cf
   }
 }
 
-void CanDriveSet::flush(std::size_t b) {
+void CanDriveSet::flush(std::size_t b, FrameBuffer& tx) {
   if (b < ports_.size() && ports_[b])
-    for (const CanFrame& f : tx_) ports_[b]->send(f);
-  tx_.clear();
+    for (const CanFrame& f : tx) ports_[b]->send(f);
+  tx.clear();
+}
+
+void CanDriveSet::propagate_fault(bool discard_pending) {
+  // A fault (or start-up failure) on one bus stops the other bus in the same
+  // cycle: its pending frames of this cycle are replaced by the safe ones.
+  const bool now_faulted = faulted();
+  const bool newly = now_faulted && !was_faulted_;
+  was_faulted_ = now_faulted;
+  // Only on the transition: while an acknowledged fault clears, the buses
+  // leave Faulted one after the other and must not re-fault each other.
+  if (!newly) return;
+  const Error first = error();
+  for (std::size_t b = 0; b < masters_.size(); ++b) {
+    const Phase p = masters_[b]->phase();
+    if (p == Phase::Cyclic || p == Phase::Resetting || p == Phase::Configuring || p == Phase::Starting) {
+      if (discard_pending) tx_[b].clear();
+      masters_[b]->fault(first, tx_[b]);
+    }
+  }
 }
 
 bool CanDriveSet::faulted() const {
@@ -32,31 +52,23 @@ bool CanDriveSet::faulted() const {
 
 Error CanDriveSet::error() const {
   for (const auto& m : masters_)
-    if (m->error()) return m->error();
+    if ((m->phase() == Phase::Faulted || m->phase() == Phase::Failed) && m->error()) return m->error();
   return {};
 }
 
 const DriveSetFeedback& CanDriveSet::read(int64_t now) {
   now_us_ = now;
   for (std::size_t b = 0; b < masters_.size(); ++b) {
-    tx_.clear();
+    tx_[b].clear();
     std::size_t n = 0;
     do {
       n = ports_[b]->receive(std::span<CanFrame>(rx_.data(), rx_.size()));
-      masters_[b]->handle(now, std::span<const CanFrame>(rx_.data(), n), tx_);
+      masters_[b]->handle(now, std::span<const CanFrame>(rx_.data(), n), tx_[b]);
     } while (n == rx_.size());
-    flush(b);
   }
-  // A fault on one bus stops the other bus in the same cycle.
-  const Error first = error();
-  if (first && (first.code != ErrorCode::None)) {
-    for (std::size_t b = 0; b < masters_.size(); ++b) {
-      if (masters_[b]->phase() == Phase::Cyclic) {
-        masters_[b]->fault(first, tx_);
-        flush(b);
-      }
-    }
-  }
+  propagate_fault(false);
+  for (std::size_t b = 0; b < masters_.size(); ++b) flush(b, tx_[b]);
+  if (faulted()) enable_wanted_ = false;  // after a fault only an explicit enable() re-enables
   fb_.enabled = n_axes_ > 0;
   fb_.faulted = faulted();
   const double sync_s = masters_.empty() ? 0 : masters_[0]->sync_period_us() * 1e-6;
@@ -95,10 +107,12 @@ void CanDriveSet::write(const Vec2& force_n) {
     m.set_command(a.slot, step.controlword, on ? a.scale.torque_permille(force_n[i]) : int16_t{0});
   }
   for (std::size_t b = 0; b < masters_.size(); ++b) {
-    tx_.clear();
-    masters_[b]->update(now_us_, tx_);
-    flush(b);
+    tx_[b].clear();
+    masters_[b]->update(now_us_, tx_[b]);
   }
+  propagate_fault(true);
+  for (std::size_t b = 0; b < masters_.size(); ++b) flush(b, tx_[b]);
+  if (faulted()) enable_wanted_ = false;
 }
 
 Error CanDriveSet::run_until(const Ticker& tick, int64_t timeout_us, const std::function<bool()>& done,
@@ -120,6 +134,7 @@ Error CanDriveSet::configure(const Ticker& tick) {
   const int64_t now = tick();
   for (auto& m : masters_) m->start(now);
   for (auto& a : axes_) a.have_prev = false;
+  was_faulted_ = false;
   const int64_t timeout = int64_t(cfg_.master.boot_timeout_ms) * 1000 + 30'000'000;
   return run_until(tick, timeout, [&] {
     for (auto& m : masters_) if (m->phase() != Phase::Cyclic) return false;

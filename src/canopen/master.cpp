@@ -194,6 +194,7 @@ void Master::start(int64_t now) {
   syncs_in_phase_ = 0;
   fault_reset_requested_ = false;
   faulted_before_shutdown_ = false;
+  needs_restart_ = false;
   // Refuse an over-budget configuration before touching the bus.
   CanConfig c;
   c.master = mc_;
@@ -230,6 +231,7 @@ void Master::enter_fault(const Error& e, FrameBuffer& tx) {
     return;
   }
   if (phase_ == Phase::Faulted || phase_ == Phase::ShuttingDown) {  // keep the first reason
+    if (!recoverable(e.code)) needs_restart_ = true;
     Error x = e;
     x.time_us = now_us_;
     log(x);
@@ -240,6 +242,7 @@ void Master::enter_fault(const Error& e, FrameBuffer& tx) {
   log(error_);
   phase_ = Phase::Faulted;
   fault_reset_requested_ = false;
+  needs_restart_ = !recoverable(e.code);
   // Safe state in this very call: torque 0 and Disable voltage, applied at a
   // SYNC sent right behind them (RPDOs are synchronous).
   for (auto& n : nodes_) {
@@ -258,7 +261,10 @@ bool Master::recoverable(ErrorCode c) const {
 }
 
 bool Master::request_fault_reset() {
-  if (phase_ != Phase::Faulted || !recoverable(error_.code)) return false;
+  // A later non-recoverable event (reboot, heartbeat loss, bus error) while
+  // faulted also needs a restart: e.g. TPDOs stop first when a drive loses
+  // power, the boot-up comes later and its configuration is gone.
+  if (phase_ != Phase::Faulted || needs_restart_) return false;
   fault_reset_requested_ = true;
   return true;
 }
@@ -586,7 +592,11 @@ void Master::update(int64_t now, FrameBuffer& tx) {
     case Phase::Faulted: {
       check_heartbeats(tx);
       if (now < next_sync_us_) return;
-      check_tpdos(tx);
+      {
+        const Phase before = phase_;
+        check_tpdos(tx);
+        if (phase_ != before) return;  // the fault already sent the safe RPDOs + SYNC
+      }
       if (phase_ == Phase::Faulted) {
         bool any_fault = false;
         for (auto& n : nodes_) {

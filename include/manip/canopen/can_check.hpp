@@ -2,6 +2,7 @@
 // Commissioning check (`manip_can_check`) and the in-process virtual set-up
 // it and the tests use (`--virtual`: one VirtualBus per configured bus, one
 // SimulatedDrive per configured drive, parameters taken from the config).
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -16,7 +17,9 @@ SimDriveParams sim_params_for(const DriveConfig& d);
 
 class VirtualRig {
  public:
-  explicit VirtualRig(const CanConfig& cfg, int64_t step_us = 250);
+  // tweak: adjust each simulated drive's parameters (mass, friction, ...).
+  explicit VirtualRig(const CanConfig& cfg, int64_t step_us = 250,
+                      const std::function<void(SimDriveParams&)>& tweak = {});
   // Advance simulated time by one control period, run every simulated drive.
   int64_t tick();
   int64_t now() const { return now_us_; }

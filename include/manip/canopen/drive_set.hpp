@@ -41,7 +41,7 @@ class CanDriveSet {
   bool request_fault_reset();           // operator acknowledge (edge on controlword bit 7)
 
   bool faulted() const;
-  Error error() const;                  // first error of any bus
+  Error error() const;                  // reason of the first faulted/failed bus ({} if none)
   std::size_t bus_count() const { return masters_.size(); }
   Master& master(std::size_t bus) { return *masters_[bus]; }
   const AxisScaling& scaling(int axis) const { return axes_[std::size_t(axis)].scale; }
@@ -57,7 +57,8 @@ class CanDriveSet {
     bool has_velocity = false;
   };
   Error run_until(const Ticker& tick, int64_t timeout_us, const std::function<bool()>& done, ErrorCode on_timeout);
-  void flush(std::size_t bus);
+  void flush(std::size_t bus, FrameBuffer& tx);
+  void propagate_fault(bool discard_pending);
 
   CanConfig cfg_;
   std::vector<CanPort*> ports_;
@@ -65,9 +66,10 @@ class CanDriveSet {
   std::array<Axis, 2> axes_{};
   int n_axes_ = 0;
   bool enable_wanted_ = false;
+  bool was_faulted_ = false;
   int64_t now_us_ = 0;
   DriveSetFeedback fb_;
-  FrameBuffer tx_;
+  std::vector<FrameBuffer> tx_;  // one per bus, preallocated
   std::array<CanFrame, 64> rx_{};
 };
 

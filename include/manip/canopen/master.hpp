@@ -182,6 +182,7 @@ class Master {
   uint32_t syncs_in_phase_ = 0;
   bool nmt_reset_pending_ = false;
   bool fault_reset_requested_ = false;
+  bool needs_restart_ = false;
   bool faulted_before_shutdown_ = false;
   int shutdown_stage_ = 0;
   std::array<Error, kLogSize> log_{};
