@@ -378,6 +378,7 @@ void Master::on_tpdo(int slot, int pdo, const CanFrame& f, FrameBuffer& tx) {
     }
   }
   if (pdo == 0) n.tpdo1_seen = true; else n.tpdo2_seen = true;
+  n.nmt = NmtState::Operational;  // PDOs are only sent in operational (CiA 301 §7.3.2)
   ++n.tpdo_received;
   n.has_feedback = true;
   n.feedback_time_us = now_us_;
