@@ -97,3 +97,12 @@ TEST_CASE("canopen units: counts <-> metres, newtons <-> per mille, signs, satur
   c.drives[0].velocity_units_per_count_s = 10;  // Copley: 0.1 count/s
   CHECK(AxisScaling::from(c.drives[0]).velocity_mps(10000) == Approx(0.001));
 }
+
+TEST_CASE("canopen config: the shipped example tests/canopen/bus.yml") {
+  CanConfig c;
+  std::vector<std::string> e;
+  REQUIRE(load_config(std::string(MANIP_SOURCE_DIR) + "/tests/canopen/bus.yml", c, e));
+  CHECK(c.drives.size() == 2);
+  CHECK(c.drives[1].max_torque_permille == 800u);
+  CHECK(c.drives[0].abort_connection_option == 1);
+}
