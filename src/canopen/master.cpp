@@ -340,6 +340,7 @@ void Master::on_heartbeat(int slot, const CanFrame& f, FrameBuffer& tx) {
   }
   n.nmt = state;
   n.last_heartbeat_us = now_us_;
+  n.heartbeat_lost = false;
   if (phase_ == Phase::Cyclic && state != NmtState::Operational)
     enter_fault(Error{ErrorCode::NmtStateWrong, n.node_id, 0, 0, f.data[0], 0, now_us_}, tx);
 }
@@ -438,11 +439,11 @@ void Master::handle(int64_t now, std::span<const CanFrame> rx, FrameBuffer& tx) 
 
 void Master::check_heartbeats(FrameBuffer& tx) {
   for (std::size_t i = 0; i < nodes_.size(); ++i) {
-    const NodeStatus& n = nodes_[i];
-    if (!n.booted && phase_ != Phase::Resetting) continue;
-    if (phase_ == Phase::Resetting) continue;  // boot deadline covers this phase
+    NodeStatus& n = nodes_[i];
+    if (!n.booted || n.heartbeat_lost) continue;  // (Resetting: the boot deadline applies)
     const int64_t age = now_us_ - n.last_heartbeat_us;
     if (age > int64_t(drives_[i].heartbeat_timeout_ms) * 1000) {
+      n.heartbeat_lost = true;
       enter_fault(Error{ErrorCode::HeartbeatLost, n.node_id, 0, 0, 0, static_cast<uint32_t>(age / 1000), now_us_}, tx);
       return;
     }

@@ -154,6 +154,11 @@ TEST_CASE("canopen fault: heartbeat loss") {
   CHECK(s.set.error().code == ErrorCode::HeartbeatLost);
   CHECK(s.set.error().node == 1);
   s.check_safe_state_after_fault();
+  for (int i = 0; i < 1000; ++i) s.cycle();  // reported once, not every cycle
+  int reports = 0;
+  for (std::size_t i = 0; i < s.set.master(1).log_count(); ++i)
+    reports += s.set.master(1).log_entry(i).code == ErrorCode::HeartbeatLost;
+  CHECK(reports == 1);
 }
 
 TEST_CASE("canopen fault: bus-off on one bus stops both buses in the same cycle") {

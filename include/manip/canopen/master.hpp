@@ -64,6 +64,7 @@ struct NodeStatus {
   NmtState nmt = NmtState::Unknown;
   bool booted = false;
   int64_t last_heartbeat_us = 0;
+  bool heartbeat_lost = false;   // reported once until the next heartbeat
   uint16_t statusword = 0;
   int32_t position_counts = 0;
   int32_t velocity_units = 0;
