@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   double duration_s = 0;
   bool never_boot = false, sdo_silent = false;
   int answer_as = 0, drop_tpdos = 0;
+  long long delay_tpdo_us = 0;
   double stop_heartbeat_after_s = -1, fault_after_s = -1;
   std::string reject;
   app.add_option("--iface", iface, "CAN interface")->capture_default_str();
@@ -45,6 +46,7 @@ int main(int argc, char** argv) {
   app.add_flag("--sdo-silent", sdo_silent, "fault injection: never answer SDOs");
   app.add_option("--answer-as-node", answer_as, "fault injection: answer SDOs with this node id");
   app.add_option("--drop-tpdos", drop_tpdos, "fault injection: drop the first N TPDOs");
+  app.add_option("--delay-tpdo-us", delay_tpdo_us, "fault injection: send every TPDO this much later");
   app.add_option("--stop-heartbeat-after", stop_heartbeat_after_s, "fault injection: stop the heartbeat after S s");
   app.add_option("--fault-after", fault_after_s, "fault injection: enter Fault (EMCY 0x2310) after S s");
   app.add_option("--reject-sdo", reject, "fault injection: INDEX:SUB:ABORT, e.g. 0x6060:0:0x06090030");
@@ -56,6 +58,7 @@ int main(int argc, char** argv) {
   drive.faults().sdo_silent = sdo_silent;
   drive.faults().answer_as_node = static_cast<uint8_t>(answer_as);
   drive.faults().drop_tpdos = static_cast<uint32_t>(drop_tpdos);
+  drive.faults().tpdo_delay_us = delay_tpdo_us;
   if (!reject.empty()) {
     // INDEX:SUB:ABORT, each decimal or 0x-hex.
     char* end = nullptr;

@@ -492,6 +492,10 @@ void SimulatedDrive::on_sync(int64_t now, FrameBuffer& tx) {
       const uint32_t v = od_value(uint16_t(m >> 16), uint8_t(m >> 8));
       for (int i = 0; i < bytes && f.dlc < 8; ++i) f.data[f.dlc++] = uint8_t(v >> (8 * i));
     }
+    if (faults_.tpdo_delay_us > 0) {
+      if (n_delayed_ < delayed_.size()) delayed_[n_delayed_++] = Delayed{now + faults_.tpdo_delay_us, f};
+      continue;
+    }
     tx.push(f);
   }
 }
@@ -544,6 +548,13 @@ void SimulatedDrive::process(int64_t now, std::span<const CanFrame> rx, FrameBuf
     enter_fault(0x8100, 0x10);
     last_sync_us_ = -1;
   }
+  // Delayed TPDOs whose time has come, oldest first.
+  std::size_t keep = 0;
+  for (std::size_t i = 0; i < n_delayed_; ++i) {
+    if (delayed_[i].at_us <= now) tx.push(delayed_[i].frame);
+    else delayed_[keep++] = delayed_[i];
+  }
+  n_delayed_ = keep;
   if (reset_emcy_pending_) {
     reset_emcy_pending_ = false;
     send_emcy(0x0000, 0x00, 0, tx);

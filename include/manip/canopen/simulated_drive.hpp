@@ -6,6 +6,7 @@
 // consumer (0x1016/0x1017), EMCY, and fault injection. Used by the unit tests
 // over the VirtualBus, by `manip_can_check --virtual`, and by the
 // `manip_fake_drive` program over SocketCAN. Passive like the Master.
+#include <array>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -42,6 +43,7 @@ struct SimFaults {
   bool heartbeat_stopped = false;   // stop the heartbeat producer
   uint32_t drop_tpdos = 0;          // drop the next N TPDOs
   bool drop_all_tpdos = false;
+  int64_t tpdo_delay_us = 0;        // hold every TPDO this long before sending it
   bool sdo_silent = false;          // never answer SDOs (-> SDO timeout)
   uint16_t reject_index = 0;        // abort SDOs to this object...
   uint8_t reject_sub = 0;
@@ -147,6 +149,12 @@ class SimulatedDrive {
   uint16_t sdo_index_ = 0;
   uint8_t sdo_sub_ = 0;
   std::string user_string_;  // 0x2F00: writable string (segmented download target)
+  struct Delayed {
+    int64_t at_us;
+    CanFrame frame;
+  };
+  std::array<Delayed, 16> delayed_{};  // TPDOs held back by faults_.tpdo_delay_us
+  std::size_t n_delayed_ = 0;
 };
 
 }  // namespace manip::canopen
