@@ -5,6 +5,7 @@ namespace manip::canopen {
 CanDriveSet::CanDriveSet(const CanConfig& cfg, std::vector<CanPort*> ports) : cfg_(cfg), ports_(std::move(ports)) {
   for (const auto& b : cfg_.buses) masters_.push_back(std::make_unique<Master>(cfg_, b.name));
   tx_.resize(masters_.size());
+  tx_failed_.assign(masters_.size(), 0);
   for (std::size_t b = 0; b < masters_.size(); ++b) {
     for (std::size_t s = 0; s < masters_[b]->node_count(); ++s) {
       const DriveConfig& d = masters_[b]->drive(s);
@@ -21,7 +22,8 @@ CanDriveSet::CanDriveSet(const CanConfig& cfg, std::vector<CanPort*> ports) : cf
 
 void CanDriveSet::flush(std::size_t b, FrameBuffer& tx) {
   if (b < ports_.size() && ports_[b])
-    for (const CanFrame& f : tx) ports_[b]->send(f);
+    for (const CanFrame& f : tx)
+      if (!ports_[b]->send(f)) tx_failed_[b] = 1;
   tx.clear();
 }
 
@@ -65,6 +67,10 @@ const DriveSetFeedback& CanDriveSet::read(int64_t now) {
       n = ports_[b]->receive(std::span<CanFrame>(rx_.data(), rx_.size()));
       masters_[b]->handle(now, std::span<const CanFrame>(rx_.data(), n), tx_[b]);
     } while (n == rx_.size());
+    if (tx_failed_[b]) {  // frames of the last cycle were refused: commands did not reach the drive
+      tx_failed_[b] = 0;
+      masters_[b]->fault(Error{ErrorCode::TxOverflow, 0, 0, 0, 0, 0, now}, tx_[b]);
+    }
   }
   propagate_fault(false);
   for (std::size_t b = 0; b < masters_.size(); ++b) flush(b, tx_[b]);

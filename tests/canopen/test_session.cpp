@@ -421,3 +421,38 @@ TEST_CASE("canopen: TPDOs delayed by the drive within one SYNC period are tolera
   CHECK(b.position_m.x() > a.position_m.x());
   CHECK(b.position_m.x() - a.position_m.x() == Approx(b.velocity_mps.x() * 500e-6).epsilon(0.05));
 }
+
+namespace {
+// A port that starts refusing frames (full transmit queue, interface down).
+struct FlakyPort : CanPort {
+  CanPort* inner;
+  bool refuse = false;
+  explicit FlakyPort(CanPort* p) : inner(p) {}
+  bool send(const CanFrame& f) override { return refuse ? false : inner->send(f); }
+  std::size_t receive(std::span<CanFrame> out) override { return inner->receive(out); }
+};
+}  // namespace
+
+TEST_CASE("canopen fault: the transport refuses frames") {
+  auto cfg = parse_ok(kTwoBuses);
+  VirtualRig rig(cfg);
+  auto ports = rig.master_ports();
+  FlakyPort flaky(ports[0]);
+  ports[0] = &flaky;
+  CanDriveSet set(cfg, ports);
+  auto tick = [&] { return rig.tick(); };
+  REQUIRE_FALSE(set.configure(tick));
+  REQUIRE_FALSE(set.enable(tick));
+  flaky.refuse = true;
+  int n = 0;
+  for (; n < 10 && !set.faulted(); ++n) {
+    const int64_t t = rig.tick();
+    set.read(t);
+    set.write(Vec2(1, 1));
+  }
+  CHECK(n <= 3);  // next SYNC (<= 2 cycles) is refused, seen at the following read()
+  CHECK(set.error().code == ErrorCode::TxOverflow);
+  CHECK(describe(set.error()) == "bus: transmit queue overflow");
+  for (int i = 0; i < 4; ++i) rig.tick();
+  CHECK(rig.drive(1).state() != cia402::State::OperationEnabled);  // the other bus went safe
+}

@@ -70,6 +70,7 @@ class CanDriveSet {
   int64_t now_us_ = 0;
   DriveSetFeedback fb_;
   std::vector<FrameBuffer> tx_;  // one per bus, preallocated
+  std::vector<uint8_t> tx_failed_;  // a send was refused (queue full / interface down)
   std::array<CanFrame, 64> rx_{};
 };
 
