@@ -30,7 +30,7 @@ struct Session {
       : Session(parse_ok(yaml), tweak) {}
   Session(const CanConfig& c, const std::function<void(SimDriveParams&)>& tweak = {})
       : cfg(c), rig(cfg, 250, tweak), set(cfg, rig.master_ports()) {
-    sent.reserve(1 << 20);
+    sent.reserve(1 << 17);
     for (std::size_t b = 0; b < rig.bus_count(); ++b)
       rig.bus(b).set_tap([this, b](int64_t t, int sender, const CanFrame& f) {
         if (record) sent.push_back({t, b, sender, f});
