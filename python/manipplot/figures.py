@@ -16,7 +16,7 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.ticker import FuncFormatter, MaxNLocator, MultipleLocator  # noqa: E402
+from matplotlib.ticker import FuncFormatter, MaxNLocator, MultipleLocator, ScalarFormatter  # noqa: E402
 
 from . import analysis as A  # noqa: E402
 from .io import BIASED_METHODS, ELEMENTS, SessionResult, Summary  # noqa: E402
@@ -33,6 +33,16 @@ RC = {
 SIGNAL_LABEL = {"dx": "Δx", "dxd": "Δẋ", "dxdd": "Δẍ", "du_ext": "Δu_ext"}
 
 
+class PlainFormatter(ScalarFormatter):
+    """ScalarFormatter with an ASCII minus whatever the global rcParams say, no offset text."""
+
+    def __init__(self):
+        super().__init__(useOffset=False, useMathText=False)
+
+    def fix_minus(self, s):
+        return s.replace("\u2212", "-")
+
+
 def _fig(h_in: float, nrows=1, ncols=1, **kw) -> (Figure, np.ndarray):
     with matplotlib.rc_context(RC):
         fig = Figure(figsize=(COLUMN_IN, h_in), layout="constrained")
@@ -47,6 +57,8 @@ def _style(ax):
         for sp in ("top", "right"):
             ax.spines[sp].set_visible(False)
         ax.yaxis.set_major_locator(MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10]))
+        ax.yaxis.set_major_formatter(PlainFormatter())
+        ax.xaxis.set_major_formatter(PlainFormatter())
         ax.yaxis.label.set_size(RC["axes.labelsize"])
         ax.xaxis.label.set_size(RC["axes.labelsize"])
 
@@ -61,7 +73,7 @@ def save(fig: Figure, path_stem: str, formats: Sequence[str] = ("png", "pdf")) -
         for f in formats:
             p = "%s.%s" % (path_stem, f)
             fig.savefig(p, format=f, dpi=RC["savefig.dpi"], bbox_inches="tight", pad_inches=0.02,
-                        metadata={"Software": "manipplot"} if f in ("png", "svg", "pdf") else None)
+                        metadata={"Creator": "manipplot"} if f in ("png", "svg", "pdf") else None)
             out.append(p)
     return out
 
@@ -211,12 +223,17 @@ def fig_directional(s: SessionResult, method: str) -> Figure:
         ax.set_xlim(0, 360)
         ax.xaxis.set_major_locator(MultipleLocator(90))
         ax.set_xlabel("perturbation angle φ [deg]")
-        axs[0, 0].legend(loc="best", fontsize=6)
+        h, l = [], []
+        for ax in axs[:, 0]:
+            for hh, ll in zip(*ax.get_legend_handles_labels()):
+                if ll not in l:
+                    h.append(hh)
+                    l.append(ll)
+        axs[0, 0].legend(h, l, loc="lower center", bbox_to_anchor=(0.5, 1.02), ncol=2, fontsize=6, handlelength=2.2)
         kind = next((r.interval for r in rows), "")
-        fig.suptitle("Directional impedance along the push, %s%s" % (method, " (biased method)" if method in BIASED_METHODS else ""),
-                     fontsize=7)
-        if kind:
-            fig.text(0.01, 0.0, "intervals: %s" % kind, fontsize=5.5, color="0.3", ha="left", va="bottom")
+        fig.suptitle("Impedance along the push u = (cos φ, sin φ), %s%s%s"
+                     % (method, " (BIASED method)" if method in BIASED_METHODS else "",
+                        "\nintervals: %s" % kind if kind else ""), fontsize=6.5)
     return fig
 
 

@@ -169,7 +169,7 @@ def directional_text(r: SessionResult, method: str) -> str:
     if not rows:
         return ""
     headers = ["angle [deg]", "uᵀDu [N s/m]", "95 % interval", "uᵀKu [N/m]", "95 % interval", "n", "fit flag"]
-    body = [[fmt_num(x["angle_deg"]), fmt_num(x.get("uDu_Nspm")),
+    body = [["%g" % x["angle_deg"], fmt_num(x.get("uDu_Nspm")),
              fmt_interval(x.get("uDu_ci95_lo_Nspm"), x.get("uDu_ci95_hi_Nspm")), fmt_num(x.get("uKu_Npm")),
              fmt_interval(x.get("uKu_ci95_lo_Npm"), x.get("uKu_ci95_hi_Npm")),
              "" if x["n_trials"] is None else str(x["n_trials"]),
