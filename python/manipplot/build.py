@@ -44,8 +44,6 @@ def resolve_inputs(res: Results, signals_dir: Optional[str], log_path: Optional[
         lp = log_path
         if lp and os.path.isdir(lp):
             lp = os.path.join(lp, os.path.basename(s.log))
-        if not lp and s.log and os.path.isfile(s.log):
-            lp = s.log
         if lp and load_logs:
             try:
                 inp.log = load_log(lp)

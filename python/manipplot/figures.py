@@ -143,7 +143,7 @@ def fig_nrmse(c: A.Nrmse, bounds: Dict[str, float] = A.PAPER_BOUNDS) -> Figure:
             ax.set_ylabel("NRMSE [%]")
         for ax in axs[1]:
             ax.set_xlabel("Δt [ms]")
-        axs[0, 0].legend(loc="upper left", handlelength=2.2)
+        axs[0, 0].legend(loc="center left", handlelength=2.2)
         fig.suptitle("NRMSE vs twin truth, %s isolation (n = %d trials)" % (c.isolation, c.n_trials), fontsize=7)
     return fig
 
@@ -177,7 +177,7 @@ def fig_variational(sig: Dict[str, np.ndarray], truth: Optional[Dict[str, np.nda
         axs[-1, 0].set_xlim(0, t_ms[-1])
         axs[-1, 0].xaxis.set_major_locator(MultipleLocator(25))
         handles, labels = axs[-1, 0].get_legend_handles_labels()
-        axs[0, 0].legend(handles, labels, loc="upper right", ncol=3, handlelength=2.2)
+        axs[0, 0].legend(handles, labels, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=3, handlelength=2.2)
         title = "Variational dynamics"
         if trial is not None:
             title += ", trial %d" % trial

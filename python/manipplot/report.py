@@ -210,6 +210,10 @@ def build_report(res_list: List[Results], signals: Optional[str], log: Optional[
             parts.append("<h3>Settings used</h3>")
             parts.append(html_table(["setting", "value"], [[_e(k), _e(json.dumps(v))] for k, v in sorted(st.items())],
                                     left_cols=(0, 1), cls="settings"))
+    # Lets a headless browser test confirm every figure decoded (naturalWidth > 0).
+    parts.append("<script>window.addEventListener('load',function(){var n=0;for(var i=0;i<document.images.length;i++)"
+                 "{if(document.images[i].naturalWidth>0)n++;}document.body.setAttribute('data-images-decoded',n);});"
+                 "</script>")
     parts.append("</body></html>")
     return "\n".join(parts), problems
 
