@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence
 
@@ -369,11 +370,14 @@ def split_by_settings(sessions: Sequence[SessionResult]) -> List[List[SessionRes
 
 def group_table(sessions: Sequence[SessionResult], method: str) -> GroupTable:
     rows = []
-    for s in sessions:
+    labels = [s.participant for s in sessions]
+    for s, lab in zip(sessions, labels):
         summ = s.summary(method, "session")
         if summ is None or summ.D is None or summ.K is None:
             raise GroupError("%s has no session estimate for method %s" % (s.log, method))
-        rows.append(GroupRow(s.participant, s.log, summ))
+        if labels.count(lab) > 1:   # e.g. every manip_sim log says "sim": tell them apart by the log's name
+            lab = "%s (%s)" % (lab, os.path.splitext(os.path.basename(s.log))[0])
+        rows.append(GroupRow(lab, s.log, summ))
     g = GroupTable(method, rows)
     for name in ELEMENT_NAMES:
         v = np.array([element_value(r.summary, name) for r in rows])

@@ -88,7 +88,7 @@ def fig_psd(p: A.Psds, cutoff_used_hz: Optional[float] = None, fmax_hz: float = 
     """Fig. 3: mean PSD of the principal-axis jerk, unperturbed vs perturbed, in dB
     re the peak of the unperturbed PSD; the unperturbed + threshold curve (the
     auto cut-off rule), the auto cut-off and the cut-off used are marked."""
-    fig, axs = _fig(2.5)
+    fig, axs = _fig(3.0)
     ax = axs[0, 0]
     _style(ax)
     sel = (p.f_hz > 0) & (p.f_hz <= fmax_hz)
@@ -113,7 +113,7 @@ def fig_psd(p: A.Psds, cutoff_used_hz: Optional[float] = None, fmax_hz: float = 
         ax.set_ylabel("jerk x2 PSD [dB re unpert. peak]")
         lo = np.nanmin(p.db(p.p_unperturbed[sel])) if p.n_unperturbed else -60
         ax.set_ylim(max(lo - 5, -80), None)
-        ax.legend(loc="lower left", handlelength=2.2)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, handlelength=2.2, columnspacing=1.0)
         ax.set_title("0 dB = %.3g (m/s³)²/Hz (unperturbed peak at %.3g Hz)" % (p.reference, p.peak_unperturbed_hz),
                      fontsize=6.5, loc="left")
     return fig
@@ -207,6 +207,15 @@ def fig_directional(s: SessionResult, method: str) -> Figure:
             truth = Dt if which == "D" else Kt
             if truth is not None:
                 ax.plot(grid, A.quad(truth, grid), **dict(TRUTH_STYLE, lw=1.0), label="truth (simulated)")
+            # y range from the session estimate and the truth (when present): per-angle values far
+            # outside are drawn as triangles at the edge ("off scale"), their numbers are in the table.
+            refs = [A.quad(M, grid) for M in (getattr(sess, which) if sess is not None else None, truth)
+                    if M is not None]
+            ylim = None
+            if refs:
+                r_lo, r_hi = min(0.0, float(np.min(refs))), float(np.max(refs))
+                span = max(r_hi - r_lo, 1e-9)
+                ylim = (r_lo - 0.6 * span, r_hi + 0.8 * span)
             for flagged in (False, True):
                 sel = [r for r in pts if (r.identifiable is False) == flagged]
                 if not sel:
@@ -215,9 +224,18 @@ def fig_directional(s: SessionResult, method: str) -> Figure:
                 y = np.array([r.value for r in sel])
                 lo = np.array([r.lo if r.lo is not None else r.value for r in sel])
                 hi = np.array([r.hi if r.hi is not None else r.value for r in sel])
-                ax.errorbar(x, y, yerr=[y - lo, hi - y], fmt="o", ms=3.2, capsize=2, lw=0.8, color="k",
-                            mfc="none" if flagged else "k",
-                            label="per angle, flagged" if flagged else "per angle (95 % interval)")
+                inside = np.ones(len(y), bool) if ylim is None else (y >= ylim[0]) & (y <= ylim[1])
+                if inside.any():
+                    ax.errorbar(x[inside], y[inside], yerr=[(y - lo)[inside], (hi - y)[inside]], fmt="o", ms=3.2,
+                                capsize=2, lw=0.8, color="k", mfc="none" if flagged else "k",
+                                label="per angle, flagged fit" if flagged else "per angle (95 % interval)")
+                for up in (True, False):
+                    off = ~inside & ((y > ylim[1]) if up else (y < ylim[0])) if ylim is not None else np.zeros(len(y), bool)
+                    if off.any():
+                        ax.plot(x[off], np.full(off.sum(), ylim[1] if up else ylim[0]), "^" if up else "v", ms=4,
+                                color="#CC79A7", clip_on=False, label="per angle, off scale (see table)")
+            if ylim is not None:
+                ax.set_ylim(*ylim)
             ax.set_ylabel("u%s%su [%s]" % ("ᵀ", which, unit))
         ax = axs[1, 0]
         ax.set_xlim(0, 360)

@@ -124,15 +124,24 @@ class Directional(unittest.TestCase):
         ref = lines["session estimate (pem)"]
         self.assertTrue(np.allclose(ref.get_ydata(), A.quad(sess.K, ref.get_xdata())))
         self.assertIn("truth (simulated)", lines)
-        # per-angle points with error bars (flagged per-angle 2x2 fits drawn hollow)
-        cont = [c for c in axk.containers if c.get_label() == "per angle, flagged"]
+        # per-angle points with error bars (flagged per-angle 2x2 fits drawn hollow): D per angle equals
+        # the session's D here, so every point is in range.
+        cont = [c for c in axd.containers if c.get_label() == "per angle, flagged fit"]
         self.assertEqual(len(cont), 1)
         x, y = cont[0].lines[0].get_data()
         self.assertEqual(list(x), [30, 60, 120, 150, 210, 240, 300, 330])
+        np.testing.assert_allclose(y, A.quad(sess.D, x))
         self.assertEqual(cont[0].lines[0].get_markerfacecolor(), "none")
         seg = cont[0].lines[2][0].get_segments()
         self.assertEqual(len(seg), 8)
         self.assertTrue(all(sg[0][1] < yy < sg[1][1] for sg, yy in zip(seg, y)))
+        # K per angle has K22 = 10067 N/m (the case): far above the session curve, drawn off scale
+        # at the top edge instead of squashing the session estimate and the truth into a flat line.
+        off = [l for l in axk.get_lines() if l.get_label() == "per angle, off scale (see table)"]
+        self.assertEqual(len(off), 1)
+        self.assertEqual(len(off[0].get_xdata()), 8)
+        self.assertTrue(np.allclose(off[0].get_ydata(), axk.get_ylim()[1]))
+        self.assertGreater(np.ptp(ref.get_ydata()), 0.2 * (axk.get_ylim()[1] - axk.get_ylim()[0]))
         draw(fig)
 
 

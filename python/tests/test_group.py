@@ -16,6 +16,11 @@ from . import fixtures as FX
 ELEMS = ["D11", "D12", "D21", "D22", "K11", "K12", "K21", "K22"]
 
 
+def read_csv(p):
+    with open(p, newline="") as f:
+        return list(csv.DictReader(f))
+
+
 def independent(method):
     per = {}
     for p in FX.GROUP_JSON:
@@ -24,7 +29,7 @@ def independent(method):
         (s,) = doc["sessions"]
         summ = next(x for x in s["summaries"] if x["method"] == method and x["group"] == "session")
         vals = summ["D_Nspm"] + summ["K_Npm"]
-        per[s["session"].get("participant_id") or os.path.splitext(os.path.basename(s["log"]))[0]] = dict(zip(ELEMS, vals))
+        per[s["log"]] = dict(zip(ELEMS, vals))
     return per
 
 
@@ -35,17 +40,17 @@ class GroupTable(unittest.TestCase):
         cls.d = tempfile.mkdtemp(prefix="manipplot_group_")
         cls.csv = os.path.join(cls.d, "g.csv")
         cls.json = os.path.join(cls.d, "g.json")
-        cls.run = subprocess.run([sys.executable, "-m", "manipplot.group"] + FX.GROUP_JSON +
+        cls.proc = subprocess.run([sys.executable, "-m", "manipplot.group"] + FX.GROUP_JSON +
                                  ["--method", "pem", "--method", "oe", "--csv", cls.csv, "--json", cls.json],
                                  capture_output=True, text=True)
 
     def test_cli_ok(self):
-        self.assertEqual(self.run.returncode, 0, self.run.stderr)
-        self.assertIn("mean (std), n = 5", self.run.stdout)
-        self.assertIn("method pem [default, recommended]", self.run.stdout)
+        self.assertEqual(self.proc.returncode, 0, self.proc.stderr)
+        self.assertIn("mean (std), n = 5", self.proc.stdout)
+        self.assertIn("method pem [default, recommended]", self.proc.stdout)
 
     def test_mean_std_equal_independent_values(self):
-        rows = list(csv.DictReader(open(self.csv)))
+        rows = read_csv(self.csv)
         for method in ("pem", "oe"):
             per = independent(method)
             self.assertEqual(len(per), 5)
@@ -61,9 +66,10 @@ class GroupTable(unittest.TestCase):
                 self.assertGreater(statistics.stdev(vals), 0.0)
                 # each participant's row carries its estimate and interval
                 prow = [r for r in rows if r["method"] == method and r["parameter"] == e and r["level"] == "participant"]
-                self.assertEqual(sorted(r["participant_id"] for r in prow), sorted(per))
+                self.assertEqual(sorted(r["log"] for r in prow), sorted(per))
+                self.assertEqual(len({r["participant_id"] for r in prow}), 5)   # unique labels
                 for r in prow:
-                    self.assertAlmostEqual(float(r["value_si"]), per[r["participant_id"]][e], delta=1e-9 * max(1, abs(per[r["participant_id"]][e])))
+                    self.assertAlmostEqual(float(r["value_si"]), per[r["log"]][e], delta=1e-9 * max(1, abs(per[r["log"]][e])))
                     self.assertLess(float(r["ci95_lo_si"]), float(r["ci95_hi_si"]))
         # K of the stiff participants is larger: the table separates people
         per = independent("pem")
@@ -71,7 +77,7 @@ class GroupTable(unittest.TestCase):
         self.assertGreater(statistics.stdev(k11.values()), 0.05 * abs(statistics.mean(k11.values())))
 
     def test_csv_typed_and_units(self):
-        rows = list(csv.DictReader(open(self.csv)))
+        rows = read_csv(self.csv)
         self.assertEqual(len(rows), 2 * 8 * (5 + 2))
         for r in rows:
             self.assertIn(r["unit"], ("N s/m", "N/m"))
@@ -82,7 +88,8 @@ class GroupTable(unittest.TestCase):
             self.assertIn(r["is_biased"], ("true", "false"))
 
     def test_json(self):
-        doc = json.load(open(self.json))
+        with open(self.json) as f:
+            doc = json.load(f)
         g = next(x for x in doc["groups"] if x["method"] == "pem")
         per = independent("pem")
         self.assertEqual(g["n_participants"], 5)
