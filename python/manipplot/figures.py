@@ -63,8 +63,8 @@ def _style(ax):
         ax.xaxis.label.set_size(RC["axes.labelsize"])
 
 
-def save(fig: Figure, path_stem: str, formats: Sequence[str] = ("png", "pdf")) -> List[str]:
-    """Write ``<path_stem>.<fmt>`` for each format; returns the paths."""
+def save(fig: Figure, path_stem: str, formats: Sequence[str] = ("png", "pdf"), dpi: Optional[float] = None) -> List[str]:
+    """Write ``<path_stem>.<fmt>`` for each format (PNG at ``dpi``, default 200); returns the paths."""
     d = os.path.dirname(path_stem)
     if d:
         os.makedirs(d, exist_ok=True)
@@ -72,7 +72,7 @@ def save(fig: Figure, path_stem: str, formats: Sequence[str] = ("png", "pdf")) -
     with matplotlib.rc_context(RC):
         for f in formats:
             p = "%s.%s" % (path_stem, f)
-            fig.savefig(p, format=f, dpi=RC["savefig.dpi"], bbox_inches="tight", pad_inches=0.02,
+            fig.savefig(p, format=f, dpi=dpi or RC["savefig.dpi"], bbox_inches="tight", pad_inches=0.02,
                         metadata={"Creator": "manipplot"} if f in ("png", "svg", "pdf") else None)
             out.append(p)
     return out
@@ -134,8 +134,8 @@ def fig_nrmse(c: A.Nrmse, bounds: Dict[str, float] = A.PAPER_BOUNDS) -> Figure:
                 ax.fill_between(t_ms, np.maximum(m - sd, 0), m + sd, color=AXIS_STYLE[a]["color"], alpha=0.15, lw=0)
             b = 100 * bounds[s]
             ax.axhline(b, color="0.45", lw=0.8, ls="-.", label="paper bound")
-            ax.text(t_ms[0], b, " %g %%" % b, va="bottom", ha="left", fontsize=6, color="0.3")
-            top = max(b, float(np.max(100 * (c.mean[s] + c.std[s])))) * 1.15
+            ax.text(0.5 * t_ms[-1], b, "%g %%" % b, va="bottom", ha="center", fontsize=6, color="0.3")
+            top = max(1.6 * b, float(np.max(100 * (c.mean[s] + c.std[s])))) * 1.1
             ax.set_ylim(0, top)
             ax.set_xlim(0, t_ms[-1])
             ax.xaxis.set_major_locator(MultipleLocator(50))
@@ -143,7 +143,7 @@ def fig_nrmse(c: A.Nrmse, bounds: Dict[str, float] = A.PAPER_BOUNDS) -> Figure:
             ax.set_ylabel("NRMSE [%]")
         for ax in axs[1]:
             ax.set_xlabel("Δt [ms]")
-        axs[0, 0].legend(loc="center left", handlelength=2.2)
+        axs[0, 0].legend(loc="upper left", handlelength=2.2)
         fig.suptitle("NRMSE vs twin truth, %s isolation (n = %d trials)" % (c.isolation, c.n_trials), fontsize=7)
     return fig
 

@@ -1,7 +1,7 @@
 """Write the session figures (PNG + PDF by default) into a directory.
 
     python3 -m manipplot.plots RESULTS.json [--signals DIR] [--log LOG] [--validation validation.json]
-                               [--method M ...] [--all-trials] [--format png,pdf,svg] -o DIR
+                               [--method M ...] [--all-trials] [--format png,pdf,svg] [--dpi 200] -o DIR
 
 Files: fig3_psd_jerk_x2, fig4_nrmse, fig5_trial_<k>, directional_<method>,
 table1_<method> (each .png/.pdf/...), directional_<method>.csv (per angle,
@@ -29,6 +29,7 @@ def main(argv=None) -> int:
     ap.add_argument("--method", action="append", help="methods for per-angle figures (default: all in the JSON)")
     ap.add_argument("--all-trials", action="store_true", help="Fig. 5 for every exported trial (default: first)")
     ap.add_argument("--format", default="png,pdf", help="comma-separated: png, pdf, svg (default png,pdf)")
+    ap.add_argument("--dpi", type=float, default=200, help="PNG resolution (default 200: 700 px at 3.5 in)")
     ap.add_argument("-o", "--out", required=True, help="output directory")
     a = ap.parse_args(argv)
     fmts = [f.strip() for f in a.format.split(",") if f.strip()]
@@ -47,7 +48,7 @@ def main(argv=None) -> int:
         os.makedirs(d, exist_ok=True)
         figs = B.session_figures(inp, a.method, a.all_trials, res.default_method)
         for name, fig in figs.items():
-            for p in B.F.save(fig, os.path.join(d, name), fmts):
+            for p in B.F.save(fig, os.path.join(d, name), fmts, a.dpi):
                 print(p)
         for m in inp.session.methods():
             rows = T.directional_rows(inp.session, m)

@@ -8,6 +8,7 @@ SESSION = os.path.join(ROOT, "session")
 S_LCM = os.path.join(SESSION, "s.lcm")
 S_JSON = os.path.join(SESSION, "s.json")
 S_SIG = os.path.join(SESSION, "sig")
+S_VAL = os.path.join(SESSION, "val", "validation.json")
 GROUP = os.path.join(ROOT, "group")
 GROUP_JSON = [os.path.join(GROUP, "p%d.json" % i) for i in range(1, 6)]
 

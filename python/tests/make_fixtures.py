@@ -2,7 +2,7 @@
 
     python -m tests.make_fixtures OUTDIR
 
-OUTDIR/session/: s.lcm (40 movements, seed 3), s.json (--method all),
+OUTDIR/session/: s.lcm (40 movements, seed 3; val/ = manip_sim --validate), s.json (--method all),
 sig/ (--export-signals). OUTDIR/group/: p1..p5.lcm/.json, five participants
 with different seeds and people (table1 / stiff presets). Reuses outputs
 whose stamp matches the command lines and the apps' modification times.
@@ -49,7 +49,8 @@ def main(out):
         print("apps not built (%s, %s): build manip_sim_app and estimate_impedance" % (SIM, EST), file=sys.stderr)
         return 1
     sdir = os.path.join(out, "session")
-    s_cmds = [[SIM, "--out", os.path.join(sdir, "s.lcm"), "--movements", "40", "--seed", "3"],
+    s_cmds = [[SIM, "--out", os.path.join(sdir, "s.lcm"), "--movements", "40", "--seed", "3",
+               "--validate", os.path.join(sdir, "val")],
               [EST, os.path.join(sdir, "s.lcm"), "--method", "all", "--json", os.path.join(sdir, "s.json"),
                "--export-signals", os.path.join(sdir, "sig"), "-q"]]
 
