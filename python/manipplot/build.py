@@ -112,5 +112,5 @@ def session_figures(inp: Inputs, methods: Optional[List[str]] = None, all_trials
             marks = T.method_marks(m, default_method)
             figs["table1_%s" % m] = F.fig_table1(
                 "%s, %s: estimate [95 %% interval]%s" % (s.participant, m, " (%s)" % marks if marks else ""),
-                T.summary_cells(summ, 3), T.flag_text(summ))
+                {k: v.replace(" [", "\n[", 1) for k, v in T.summary_cells(summ, 3).items()}, T.flag_text(summ))
     return figs

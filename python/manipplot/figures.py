@@ -257,23 +257,36 @@ def fig_directional(s: SessionResult, method: str) -> Figure:
 
 # --------------------------------------------------------------------------- Table 1
 def fig_table1(title: str, cells: Dict[str, str], note: str = "") -> Figure:
-    """A Table-1 style figure: D [N s/m] and K [N/m] as 2x2 blocks; ``cells`` maps
-    'D11'..'K22' to the text of that cell (e.g. '10.98 (4.85)')."""
-    fig, axs = _fig(1.25)
+    """A Table-1 style figure: D [N s/m] and K [N/m] as 2x2 blocks side by side; ``cells`` maps
+    'D11'..'K22' to the text of that cell (e.g. '10.98 (4.85)'). Every text has a gid
+    ('header:D', 'cell:D11', ...) so tests can find it."""
+    # One column wide unless the cells need more: the figure widens, cells never overlap.
+    longest = max([len(line) for v in cells.values() for line in str(v).splitlines()] + [1])
+    width = max(COLUMN_IN, 4 * longest * 6.0 * 0.62 / 72.0 + 0.3)
+    two_lines = any("\n" in str(v) for v in cells.values())
+    fig, axs = _fig(1.4 if two_lines else 1.1)
+    fig.set_size_inches(width, fig.get_size_inches()[1])
     ax = axs[0, 0]
-    ax.axis("off")
+    ax.set_axis_off()
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
     with matplotlib.rc_context(RC):
-        text = [["D [N s/m]", "", "K [N/m]", ""],
-                [cells.get("D11", ""), cells.get("D12", ""), cells.get("K11", ""), cells.get("K12", "")],
-                [cells.get("D21", ""), cells.get("D22", ""), cells.get("K21", ""), cells.get("K22", "")]]
-        tb = ax.table(cellText=text, loc="center", cellLoc="center", edges="open")
-        tb.auto_set_font_size(False)
-        tb.set_fontsize(6.5)
-        tb.scale(1.0, 1.3)
-        for (r, c), cell in tb.get_celld().items():
-            if r == 0:
-                cell.set_text_props(weight="bold")
-        ax.set_title(title, fontsize=7)
+        xs = {"1": (0.125, 0.625), "2": (0.375, 0.875)}   # column within block -> x of D, x of K
+        for which, x in (("D", 0.25), ("K", 0.75)):
+            t = ax.text(x, 0.86, "%s [%s]" % ("Damping D" if which == "D" else "Stiffness K",
+                                              "N s/m" if which == "D" else "N/m"),
+                        ha="center", va="center", fontsize=6.5, weight="bold")
+            t.set_gid("header:%s" % which)
+        ax.plot([0.02, 0.98], [0.72, 0.72], color="k", lw=0.6)
+        ax.plot([0.02, 0.98], [0.08, 0.08], color="k", lw=0.6)
+        ax.plot([0.5, 0.5], [0.1, 0.95], color="0.6", lw=0.5)
+        for r, y in (("1", 0.55), ("2", 0.27)):
+            for c in ("1", "2"):
+                for i, which in enumerate(("D", "K")):
+                    name = "%s%s%s" % (which, r, c)
+                    t = ax.text(xs[c][i], y, cells.get(name, ""), ha="center", va="center", fontsize=6)
+                    t.set_gid("cell:%s" % name)
+        ax.set_title(title, fontsize=6.5)
         if note:
-            fig.text(0.01, 0.0, note, fontsize=5.5, color="0.3", ha="left", va="bottom")
+            fig.text(0.01, 0.0, note, fontsize=5.5, color="#b00000", ha="left", va="bottom")
     return fig

@@ -50,7 +50,7 @@ def main(argv=None) -> int:
         for name, fig in figs.items():
             for p in B.F.save(fig, os.path.join(d, name), fmts, a.dpi):
                 print(p)
-        for m in inp.session.methods():
+        for m in a.method or inp.session.methods():
             rows = T.directional_rows(inp.session, m)
             if rows:
                 p = os.path.join(d, "directional_%s.csv" % m)

@@ -147,16 +147,24 @@ class Directional(unittest.TestCase):
 
 class Table1(unittest.TestCase):
     def test_table_figure_and_save(self):
-        cells = {n: "%d.00 (1.00)" % i for i, n in enumerate(A.ELEMENT_NAMES)}
+        cells = {n: "-%d.000 [-1.000e+05, 1.000e+05]" % i for i, n in enumerate(A.ELEMENT_NAMES)}
         fig = F.fig_table1("P1, pem", cells)
-        tb = fig.axes[0].tables[0]
-        texts = {k: c.get_text().get_text() for k, c in tb.get_celld().items()}
-        self.assertEqual(texts[(0, 0)], "D [N s/m]")
-        self.assertEqual(texts[(0, 2)], "K [N/m]")
-        self.assertEqual([texts[(1, 0)], texts[(1, 1)], texts[(2, 0)], texts[(2, 1)]],
-                         [cells["D11"], cells["D12"], cells["D21"], cells["D22"]])
-        self.assertEqual([texts[(1, 2)], texts[(1, 3)], texts[(2, 2)], texts[(2, 3)]],
-                         [cells["K11"], cells["K12"], cells["K21"], cells["K22"]])
+        texts = {t.get_gid(): t for t in fig.axes[0].texts}
+        self.assertEqual(texts["header:D"].get_text(), "Damping D [N s/m]")
+        self.assertEqual(texts["header:K"].get_text(), "Stiffness K [N/m]")
+        for n in A.ELEMENT_NAMES:
+            self.assertEqual(texts["cell:" + n].get_text(), cells[n])
+        # Layout like the paper: D block left of K block, row 1 above row 2, column 1 left of column 2.
+        pos = {n: texts["cell:" + n].get_position() for n in A.ELEMENT_NAMES}
+        self.assertLess(pos["D12"][0], pos["K11"][0])
+        self.assertGreater(pos["K12"][1], pos["K22"][1])
+        self.assertLess(pos["K21"][0], pos["K22"][0])
+        r = draw(fig)
+        boxes = [texts["cell:" + n].get_window_extent(r) for n in A.ELEMENT_NAMES]
+        for i in range(len(boxes)):
+            self.assertTrue(fig.bbox.x0 <= boxes[i].x0 and boxes[i].x1 <= fig.bbox.x1)
+            for j in range(i + 1, len(boxes)):
+                self.assertFalse(boxes[i].overlaps(boxes[j]), "cells overlap")
         d = tempfile.mkdtemp()
         paths = F.save(fig, os.path.join(d, "t"), ("png", "pdf", "svg"))
         self.assertEqual([os.path.splitext(p)[1] for p in paths], [".png", ".pdf", ".svg"])
@@ -165,7 +173,7 @@ class Table1(unittest.TestCase):
         with open(paths[1], "rb") as f:
             self.assertEqual(f.read(5), b"%PDF-")
         with open(paths[2]) as f:
-            self.assertIn("K [N/m]", f.read())
+            self.assertIn("Stiffness K [N/m]", f.read())
 
 
 if __name__ == "__main__":
