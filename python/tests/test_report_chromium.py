@@ -115,6 +115,18 @@ def main():
     fails += ["group report: " + f for f in check(gdom, os.path.join(out, "group.png"), gexp, ["group", "table1"])]
     if "mean (std), n = 5" not in gdom:
         fails.append("group report: no 'mean (std), n = 5' row")
+    # Control: a page whose figure does not decode and which has no table must be caught by the same checks.
+    bad = os.path.join(out, "control_broken.html")
+    with open(bad, "w") as f:
+        f.write("<!DOCTYPE html><html><body><p>x</p><img data-figure=\"fig3_psd_jerk_x2\" src=\"data:image/png;base64,AAAA\">"
+                "<script>window.addEventListener('load',function(){var n=0;for(var i=0;i<document.images.length;i++)"
+                "{if(document.images[i].naturalWidth>0)n++;}document.body.setAttribute('data-images-decoded',n);});"
+                "</script></body></html>")
+    cdom = render(exe, bad, os.path.join(out, "control_broken.png"))
+    cf = check(cdom, os.path.join(out, "control_broken.png"), ["fig3_psd_jerk_x2"], ["table1"])
+    want = ("decoded images", "table table1 missing", "nearly uniform")
+    if not all(any(w in f for f in cf) for w in want):
+        fails.append("control page not caught by the checks: %s" % cf)
     for f in fails:
         print("FAIL:", f)
     print("report: %s\nscreenshot: %s\ngroup report: %s\ngroup screenshot: %s"
