@@ -41,7 +41,8 @@ tr.default td{background:#eef7ee;font-weight:bold} tr.biased td{background:#fbea
 span.flag{color:#b00;font-weight:bold} span.mark{font-size:12px;padding:1px 4px;border-radius:3px;margin-left:4px}
 span.def{background:#2a7a2a;color:#fff} span.bias{background:#a00;color:#fff}
 figure{display:inline-block;margin:8px 12px 8px 0;vertical-align:top} figure img{width:480px;height:auto;border:1px solid #ddd}
-figcaption{font-size:12px;max-width:480px;color:#333} .note{color:#555;font-size:12px} ul.warn li{color:#840}
+figcaption{font-size:12px;max-width:480px;color:#333} span.ci{font-size:12px;color:#444}
+td.wrap{white-space:normal;overflow-wrap:anywhere;max-width:320px} td.kind{white-space:normal;max-width:260px} h4{font-size:14px;margin:10px 0 0 0} .note{color:#555;font-size:12px} ul.warn li{color:#840}
 """
 
 CAPTIONS = {
@@ -80,13 +81,17 @@ def caption_of(name: str) -> str:
 
 
 def html_table(headers: List[str], rows: List[List[str]], row_classes: Optional[List[str]] = None,
-               left_cols=(0,), cls: str = "") -> str:
+               left_cols=(0,), cls: str = "", col_classes: Optional[dict] = None) -> str:
+    col_classes = col_classes or {}
+
+    def k(i):
+        return " ".join(x for x in ("l" if i in left_cols else "", col_classes.get(i, "")) if x)
     out = ['<table class="%s">' % _e(cls), "<tr>"]
-    out += ['<th class="%s">%s</th>' % ("l" if i in left_cols else "", h) for i, h in enumerate(headers)]
+    out += ['<th class="%s">%s</th>' % (k(i), h) for i, h in enumerate(headers)]
     out.append("</tr>")
     for j, r in enumerate(rows):
         out.append('<tr class="%s">' % _e(row_classes[j] if row_classes else ""))
-        out += ['<td class="%s">%s</td>' % ("l" if i in left_cols else "", c) for i, c in enumerate(r)]
+        out += ['<td class="%s">%s</td>' % (k(i), c) for i, c in enumerate(r)]
         out.append("</tr>")
     out.append("</table>")
     return "\n".join(out)
@@ -101,26 +106,39 @@ def marks_html(method: str, default_method: str) -> str:
     return out
 
 
+def _cell2(text: str) -> str:
+    """'estimate [lo, hi]' -> estimate, interval on a second line (keeps wide tables on the page)."""
+    est, sep, rest = text.partition(" ")
+    return _e(est) + ("<br><span class='ci'>%s</span>" % _e(rest) if sep else "")
+
+
 def session_table_html(s: SessionResult, default_method: str) -> str:
-    headers = ["method", "kind", "n"] + ["%s [%s]" % (n, T.UNIT[n[0]]) for n in A.ELEMENT_NAMES] + ["flags"]
-    rows, cls = [], []
-    for m in s.methods():
-        summ = s.summary(m, "session")
-        if summ is None:
-            continue
-        c = T.summary_cells(summ)
-        flag = T.flag_text(summ)
-        rows.append([_e(m) + marks_html(m, default_method), _e(summ.kind), _e(summ.n_trials or "")]
-                    + [_e(c[n]) for n in A.ELEMENT_NAMES] + ['<span class="flag">%s</span>' % _e(flag) if flag else ""])
-        cls.append("default" if m == default_method else ("biased" if m in BIASED_METHODS else ""))
+    """Table-1 summary as two tables (damping, stiffness) so that wide numbers stay on the page."""
+    methods = [m for m in s.methods() if s.summary(m, "session") is not None]
     Dt, Kt = s.truth_mats()
-    if Dt is not None:
-        rows.append(["truth", _e(s.truth.get("model", "")), ""] + [_e(T.fmt_num((Dt if n[0] == "D" else Kt).ravel()[
-            A.ELEMENTS.index(n[1:])])) for n in A.ELEMENT_NAMES] + [""])
-        cls.append("truth")
-    notes = "".join("<li>%s</li>" % _e(x) for x in T.legend_lines(s.methods(), default_method).replace("  note: ", "")
+    out = []
+    for which, title in (("D", "Damping D [N s/m]"), ("K", "Stiffness K [N/m]")):
+        names = [n for n in A.ELEMENT_NAMES if n[0] == which]
+        headers = ["method", "kind", "n"] + ["%s [%s]" % (n, T.UNIT[which]) for n in names] + ["flags"]
+        rows, cls = [], []
+        for m in methods:
+            summ = s.summary(m, "session")
+            c = T.summary_cells(summ)
+            flag = T.flag_text(summ)
+            rows.append([_e(m) + marks_html(m, default_method), _e(summ.kind), _e(summ.n_trials or "")]
+                        + [_cell2(c[n]) for n in names] + ['<span class="flag">%s</span>' % _e(flag) if flag else ""])
+            cls.append("default" if m == default_method else ("biased" if m in BIASED_METHODS else ""))
+        M = Dt if which == "D" else Kt
+        if M is not None:
+            rows.append(["truth", _e(s.truth.get("model", "")), ""]
+                        + [_e(T.fmt_num(M.ravel()[A.ELEMENTS.index(n[1:])])) for n in names] + [""])
+            cls.append("truth")
+        out.append("<h4>%s</h4>" % _e(title))
+        out.append(html_table(headers, rows, cls, left_cols=(0, 1, 7), cls="table1",
+                              col_classes={1: "kind", 7: "kind"}))
+    notes = "".join("<li>%s</li>" % _e(x) for x in T.legend_lines(methods, default_method).replace("  note: ", "")
                     .strip().splitlines() if x)
-    return html_table(headers, rows, cls, left_cols=(0, 1, 12), cls="table1") + ("<ul>%s</ul>" % notes if notes else "")
+    return "\n".join(out) + ("<ul>%s</ul>" % notes if notes else "")
 
 
 def directional_html(s: SessionResult, method: str) -> str:
@@ -149,7 +167,7 @@ def group_html(sessions: List[SessionResult], default_method: str) -> str:
     for m in methods:
         g = A.group_table(sessions, m)
         headers = ["participant"] + ["%s [%s]" % (n, T.UNIT[n[0]]) for n in A.ELEMENT_NAMES] + ["flags"]
-        rows = [[_e(r.participant)] + [_e(T.summary_cells(r.summary)[n]) for n in A.ELEMENT_NAMES]
+        rows = [[_e(r.participant)] + [_cell2(T.summary_cells(r.summary)[n]) for n in A.ELEMENT_NAMES]
                 + [_e(T.flag_text(r.summary))] for r in g.rows]
         rows.append(["<b>mean (std), n = %d</b>" % g.n] + ["<b>%s (%s)</b>" % (_e(T.fmt_num(g.mean[n])),
                                                                                _e(T.fmt_num(g.std[n])))
@@ -183,12 +201,14 @@ def build_report(res_list: List[Results], signals: Optional[str], log: Optional[
                                       _e(info.get("source", "")), _e(info.get("software_version", "")),
                                       _e(info.get("sample_rate_hz", "")), _e(c.get("trials", "")),
                                       _e(c.get("perturbed", "")), _e(c.get("used", "")),
-                                      _e(T.fmt_num(s.cutoff_used_hz))]], left_cols=(0, 1, 2, 3, 4), cls="info"))
+                                      _e(T.fmt_num(s.cutoff_used_hz))]], left_cols=(0, 1, 2, 3, 4), cls="info",
+                                    col_classes={0: "wrap"}))
             parts.append("<h3>Summary (Table 1 layout): estimate [95 % interval]</h3>")
             parts.append(session_table_html(s, default))
             err = T.truth_error_text(s)
             if err:
-                parts.append("<h3>Error vs truth</h3><pre>%s</pre>" % _e(err))
+                parts.append("<h3>Error vs truth: (estimate - truth) / truth</h3><pre>%s</pre>"
+                             % _e(err.split("\n", 1)[1]))
             parts.append(directional_html(s, default))
             figs = B.session_figures(inp, None, all_trials, default)
             parts.append("<h3>Figures</h3>")
@@ -209,7 +229,7 @@ def build_report(res_list: List[Results], signals: Optional[str], log: Optional[
             st.update(s.settings or {})
             parts.append("<h3>Settings used</h3>")
             parts.append(html_table(["setting", "value"], [[_e(k), _e(json.dumps(v))] for k, v in sorted(st.items())],
-                                    left_cols=(0, 1), cls="settings"))
+                                    left_cols=(0, 1), cls="settings", col_classes={1: "wrap"}))
     # Lets a headless browser test confirm every figure decoded (naturalWidth > 0).
     parts.append("<script>window.addEventListener('load',function(){var n=0;for(var i=0;i<document.images.length;i++)"
                  "{if(document.images[i].naturalWidth>0)n++;}document.body.setAttribute('data-images-decoded',n);});"
