@@ -360,6 +360,14 @@ def parse_results(doc: dict, path: str = "<json>") -> Results:
     sessions = []
     for s in doc.get("sessions", []) or []:
         sums = [_summary(x) for x in (s.get("summaries") or [])]
+        # A separate typed per-angle list, if a later layout has one (entries with numeric angle_deg).
+        for key in ("per_angle", "angles", "per_angle_summaries"):
+            for x in (s.get(key) or []) if isinstance(s.get(key), list) else []:
+                if isinstance(x, dict):
+                    y = dict(x)
+                    if "group" not in y and isinstance(y.get("angle_deg"), (int, float)):
+                        y["group"] = "angle %g" % y["angle_deg"]
+                    sums.append(_summary(y))
         # Older/other layouts: session_summary only.
         if not sums and isinstance(s.get("session_summary"), dict):
             for m, x in s["session_summary"].items():

@@ -254,3 +254,42 @@ def group_json(g: A.GroupTable, default_method: str = DEFAULT_METHOD) -> dict:
                                            "ci95_hi": clean(A.element_value(r.summary, n, "hi"))}
                                        for n in A.ELEMENT_NAMES}} for r in g.rows],
     }
+
+
+def main(argv=None) -> int:
+    """python3 -m manipplot.tables RESULTS.json [--method M] [--directional-csv DIR]: the Table-1 summary,
+    errors vs truth and directional impedance per angle of every session, as text."""
+    import argparse
+    import os
+    import sys
+    from .io import load_results
+    ap = argparse.ArgumentParser(prog="python3 -m manipplot.tables", description=main.__doc__)
+    ap.add_argument("results")
+    ap.add_argument("--method", action="append", help="methods for the per-angle table (default: the default method)")
+    ap.add_argument("--directional-csv", help="write directional_<method>.csv per session into this directory")
+    a = ap.parse_args(argv)
+    try:
+        res = load_results(a.results)
+    except (OSError, ValueError) as e:
+        print("manipplot.tables: %s" % e, file=sys.stderr)
+        return 2
+    for s in res.sessions:
+        print(session_table_text(s, res.default_method))
+        err = truth_error_text(s)
+        if err:
+            print(err)
+        for m in a.method or [res.default_method]:
+            txt = directional_text(s, m)
+            if txt:
+                print(txt)
+            if a.directional_csv:
+                os.makedirs(a.directional_csv, exist_ok=True)
+                stem = os.path.splitext(os.path.basename(s.log))[0] or "session"
+                write_csv(os.path.join(a.directional_csv, "%s_directional_%s.csv" % (stem, m)), DIRECTIONAL_COLUMNS,
+                          directional_rows(s, m))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+    sys.exit(main())

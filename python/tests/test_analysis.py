@@ -69,6 +69,13 @@ class Directional(unittest.TestCase):
                                            summary("pem", "session", [1, 0, 0, 1], [1, 0, 0, 1])]}]}
         s = parse_results(doc).sessions[0]
         self.assertEqual([x.angle_deg for x in s.per_angle("pem")], [120.0, 150.0])
+        # a separate typed per-angle list (a possible later layout) is read too
+        x = summary("pem", "ignored", [1, 0, 0, 1], [2, 0, 0, 2], angle=30.0)
+        del x["group"]
+        doc["sessions"][0]["per_angle"] = [x]
+        s = parse_results(doc).sessions[0]
+        self.assertEqual([x.angle_deg for x in s.per_angle("pem")], [30.0, 120.0, 150.0])
+        self.assertEqual(s.per_angle("pem")[0].group, "angle 30")
 
 
 class Nrmse(unittest.TestCase):

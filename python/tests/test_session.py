@@ -2,6 +2,7 @@
 import glob
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -96,6 +97,32 @@ class Session(unittest.TestCase):
                 self.assertTrue(lo <= truth <= hi, "%s at %g deg: truth %g outside [%g, %g]"
                                 % (which, r["angle_deg"], truth, lo, hi))
         print("\n" + T.directional_text(self.s, self.res.default_method))
+
+    def test_text_tables_never_fuse_on_real_numbers(self):
+        r = subprocess.run([sys.executable, "-m", "manipplot.tables", FX.S_JSON, "--method", "pem", "--method", "oe-trial"],
+                           capture_output=True, text=True)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        lines = r.stdout.splitlines()
+        n_tables = 0
+        for i, line in enumerate(lines):
+            if not re.fullmatch(r"-+( +-+)+", line):
+                continue
+            n_tables += 1
+            spans = [m.span() for m in re.finditer(r"-+", line)]
+            body = []
+            for l in lines[i + 1:]:
+                if not l.strip() or l.startswith("  note:") or l.startswith("  truth"):
+                    break
+                body.append(l)
+            self.assertTrue(body)
+            for l in [lines[i - 1]] + body:
+                self.assertTrue(l[spans[0][0]:spans[0][1]].strip(), "first column empty in %r" % l)
+                for (a, b), (c, _) in zip(spans, spans[1:]):
+                    gutter = l[b:c]
+                    self.assertTrue(gutter == "" or not gutter.strip(), "fused columns in %r" % l)
+        self.assertGreaterEqual(n_tables, 4)   # Table 1, error vs truth, two directional tables
+        self.assertIn("default, recommended", r.stdout)
+        self.assertIn("BIASED", r.stdout)
 
     def test_plots_cli(self):
         d = tempfile.mkdtemp(prefix="manipplot_plots_")

@@ -29,7 +29,7 @@ def main(fix):
         shutil.copy(os.path.join(tmp, src), os.path.join(IMG, dst or src))
     from PIL import Image
     im = Image.open(os.path.join(fix, "report", "report.png")).convert("RGB")
-    im = im.crop((0, 0, 1200, 1800)).resize((700, 1050), Image.LANCZOS).quantize(colors=12, method=Image.MEDIANCUT)
+    im = im.crop((0, 0, 1200, 1800)).resize((700, 1050), Image.LANCZOS).quantize(colors=64, method=Image.FASTOCTREE)
     im.save(os.path.join(IMG, "report_screenshot.png"), optimize=True)
     for f in sorted(os.listdir(IMG)):
         size = os.path.getsize(os.path.join(IMG, f))
