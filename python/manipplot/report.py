@@ -38,11 +38,11 @@ h1{font-size:22px} h2{font-size:18px;border-bottom:1px solid #999;margin-top:32p
 table{border-collapse:collapse;margin:8px 0 16px 0} th,td{border:1px solid #bbb;padding:3px 6px;text-align:right;white-space:nowrap}
 th{background:#eee} td.l,th.l{text-align:left}
 tr.default td{background:#eef7ee;font-weight:bold} tr.biased td{background:#fbeaea;color:#700}
-span.flag{color:#b00;font-weight:bold} span.mark{font-size:12px;padding:1px 4px;border-radius:3px;margin-left:4px}
+span.flag{color:#b00;font-weight:bold} span.small{font-size:11px} span.mark{font-size:12px;padding:1px 4px;border-radius:3px;margin-left:4px}
 span.def{background:#2a7a2a;color:#fff} span.bias{background:#a00;color:#fff}
 figure{display:inline-block;margin:8px 12px 8px 0;vertical-align:top} figure img{width:480px;height:auto;border:1px solid #ddd}
 figcaption{font-size:12px;max-width:480px;color:#333} span.ci{font-size:12px;color:#444}
-td.wrap{white-space:normal;overflow-wrap:anywhere;max-width:320px} td.kind{white-space:normal;max-width:260px} h4{font-size:14px;margin:10px 0 0 0} .note{color:#555;font-size:12px} ul.warn li{color:#840}
+td.wrap{white-space:normal;overflow-wrap:anywhere;max-width:320px} td.kind{white-space:normal;max-width:260px;min-width:110px} h4{font-size:14px;margin:10px 0 0 0} .note{color:#555;font-size:12px} ul.warn li{color:#840}
 """
 
 CAPTIONS = {
@@ -166,14 +166,17 @@ def group_html(sessions: List[SessionResult], default_method: str) -> str:
     methods = [m for m in sessions[0].methods() if all(s.summary(m, "session") is not None for s in sessions)]
     for m in methods:
         g = A.group_table(sessions, m)
-        headers = ["participant"] + ["%s [%s]" % (n, T.UNIT[n[0]]) for n in A.ELEMENT_NAMES] + ["flags"]
-        rows = [[_e(r.participant)] + [_cell2(T.summary_cells(r.summary)[n]) for n in A.ELEMENT_NAMES]
-                + [_e(T.flag_text(r.summary))] for r in g.rows]
+        headers = ["participant (flags)"] + ["%s [%s]" % (n, T.UNIT[n[0]]) for n in A.ELEMENT_NAMES]
+
+        def who(r):
+            f = T.flag_text(r.summary)
+            return _e(r.participant) + ("<br><span class='flag small'>%s</span>" % _e(f) if f else "")
+        rows = [[who(r)] + [_cell2(T.summary_cells(r.summary)[n]) for n in A.ELEMENT_NAMES] for r in g.rows]
         rows.append(["<b>mean (std), n = %d</b>" % g.n] + ["<b>%s (%s)</b>" % (_e(T.fmt_num(g.mean[n])),
                                                                                _e(T.fmt_num(g.std[n])))
-                                                          for n in A.ELEMENT_NAMES] + [""])
+                                                          for n in A.ELEMENT_NAMES])
         out.append("<h3>%s%s</h3>" % (_e(m), marks_html(m, default_method)))
-        out.append(html_table(headers, rows, left_cols=(0, 9), cls="group"))
+        out.append(html_table(headers, rows, left_cols=(0,), cls="group", col_classes={0: "kind"}))
     return "\n".join(out)
 
 
