@@ -19,9 +19,12 @@ IMG = os.path.join(SRC, "docs", "img")
 def main(fix):
     s = os.path.join(fix, "session")
     tmp = tempfile.mkdtemp()
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([os.path.join(SRC, "python"), os.path.join(SRC, "build", "python"),
+                                         env.get("PYTHONPATH", "")])
     subprocess.run([sys.executable, "-m", "manipplot.plots", os.path.join(s, "s.json"), "--signals",
                     os.path.join(s, "sig"), "--log", os.path.join(s, "s.lcm"), "-o", tmp, "--format", "png",
-                    "--dpi", "130", "--method", "pem"], check=True, stdout=subprocess.DEVNULL)
+                    "--dpi", "130", "--method", "pem"], check=True, stdout=subprocess.DEVNULL, env=env)
     os.makedirs(IMG, exist_ok=True)
     first5 = sorted(f for f in os.listdir(tmp) if f.startswith("fig5_trial_"))[0]
     for src, dst in (("fig3_psd_jerk_x2.png", None), ("fig4_nrmse.png", None), (first5, "fig5_trial.png"),
