@@ -35,13 +35,17 @@ std::array<double, 6> reflex_lowpass_sos(double fn_hz, double zeta, double dt_s)
 namespace {
 
 // Physiological search range of the reflex shape (docs/diagnosis.md, "Stretch reflex"):
-// loop delay 20-100 ms brackets the short-latency (~40 ms at the ankle) and
-// medium-latency stretch reflex; the low-pass corner 2-25 Hz spans the
-// twitch dynamics of the reflex path (Kearney et al. 1997 report reflex
-// dynamics with a corner of a few Hz).
+// - loop delay 20-100 ms: brackets the short-latency stretch reflex of the
+//   ankle muscles (EMG latency ~40 ms, torque delay 40-50 ms: Kearney, Stein &
+//   Parameswaran 1997; Mirbagheri et al. 2000) and the medium-latency response;
+// - low-pass corner 1-25 Hz, damping 0.5-1: the reflex torque follows muscle
+//   activation through twitch dynamics, a critically damped second-order
+//   system with corner ~1/(2 pi T_c); twitch contraction times T_c of 40-150 ms
+//   (fast to slow, soleus being slow) give ~1-4 Hz, and the upper end leaves
+//   room for faster pathways.
 constexpr double kDelayLo_s = 0.020, kDelayHi_s = 0.100;
-constexpr double kFnLo_hz = 2.0, kFnHi_hz = 25.0;
-constexpr int kFnCount = 10;
+constexpr double kFnLo_hz = 1.0, kFnHi_hz = 25.0;
+constexpr int kFnCount = 12;
 constexpr double kZetas[] = {0.5, 0.75, 1.0};
 
 class StretchReflexImpl final : public Mechanism {
@@ -205,19 +209,27 @@ class OffsetDriftImpl final : public Mechanism {
 class CoulombFrictionImpl final : public Mechanism {
  public:
   std::string id() const override { return "coulomb_friction"; }
-  std::string title() const override { return "Coulomb-like friction: Fc sign(v)"; }
+  std::string title() const override { return "Coulomb-like friction: Fc tanh(v / v_s)"; }
   std::string signature() const override {
     return "residual correlates with the sign of velocity (a step at every reversal)";
+  }
+  // A pure sign(v) is undefined during holds, where the measured velocity is
+  // noise; the smooth Coulomb law tanh(v / v_s) (e.g. Olsson et al. 1998,
+  // "Friction models and friction compensation") has a transition velocity
+  // v_s, searched over 2-50 mrad/s (below the perturbation's velocities of
+  // 0.1-3 rad/s, above an encoder's velocity noise).
+  std::vector<ParamInfo> shape_params() const override { return {{"v_s", "rad/s", 0.002, 0.05}}; }
+  std::vector<std::vector<double>> grid(const Dataset&) const override {
+    return {{0.002}, {0.005}, {0.01}, {0.02}, {0.05}};
   }
   std::vector<ParamInfo> gains() const override {
     // Friction of a pedal/ankle-orthosis bearing: well below 5 N m.
     return {{"Fc", "N m", 0.0, 5.0}};
   }
-  int main_param() const override { return 0; }
-  Columns columns(const Dataset& d, std::span<const double>) const override {
-    return pointwise(d, [](const Segment& s, std::size_t i) {
-      return s.vel[i] > 0.0 ? 1.0 : (s.vel[i] < 0.0 ? -1.0 : 0.0);
-    });
+  int main_param() const override { return 1; }
+  Columns columns(const Dataset& d, std::span<const double> setting) const override {
+    const double vs = setting[0];
+    return pointwise(d, [vs](const Segment& s, std::size_t i) { return std::tanh(s.vel[i] / vs); });
   }
 };
 
