@@ -532,7 +532,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       cs.setting = grid[best_all_s];
       const auto sp = mech.shape_params();
       for (std::size_t i = 0; i < sp.size(); ++i)
-        cs.params.push_back({sp[i].name, sp[i].unit, {cs.setting[i], cs.setting[i], cs.setting[i]}, sp[i].plausible_lo, sp[i].plausible_hi, true});
+        cs.params.push_back({sp[i].name, sp[i].unit, {cs.setting[i], cs.setting[i], cs.setting[i]}, sp[i].plausible_lo, sp[i].plausible_hi, true, true});
       const auto gs = mech.gains();
       for (std::size_t i = 0; i < gs.size(); ++i) {
         const double v = best_all_th(p + static_cast<Eigen::Index>(i));
@@ -698,6 +698,12 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
   Eigen::Index col = p0;
   for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
     if (static_cast<int>(a) == gridded) continue;
+    // Shape of a mechanism other than the re-searched one: kept at its full-data value (no interval).
+    const auto sp = lib[accepted_idx[a]]->shape_params();
+    for (std::size_t i = 0; i < sp.size(); ++i) {
+      const double v = out.accepted_settings[a][i];
+      out.final_params.push_back({sp[i].name, sp[i].unit, {v, v, v}, sp[i].plausible_lo, sp[i].plausible_hi, true, true});
+    }
     for (const auto& g : lib[accepted_idx[a]]->gains()) {
       out.final_params.push_back({g.name, g.unit, column_interval(col), g.plausible_lo, g.plausible_hi, true});
       ++col;
@@ -709,7 +715,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     for (std::size_t i = 0; i < sp.size(); ++i) {
       std::vector<double> b;
       for (const auto& s : shape_boot) b.push_back(s[i]);
-      out.final_params.push_back({sp[i].name, sp[i].unit, to_interval(shape_full[i], b), sp[i].plausible_lo, sp[i].plausible_hi, true});
+      out.final_params.push_back({sp[i].name, sp[i].unit, to_interval(shape_full[i], b), sp[i].plausible_lo, sp[i].plausible_hi, true, true});
     }
     for (const auto& g : mech.gains()) {
       out.final_params.push_back({g.name, g.unit, column_interval(col), g.plausible_lo, g.plausible_hi, true});
@@ -722,6 +728,29 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     std::vector<std::pair<std::size_t, std::size_t>> where;
     const auto r = residual(d, model, blocks, th, &where);
     out.after = signatures(d, blocks, r, where, opt.alpha);
+    // Each accepted term's RMS, and the target's, over the usable blocks.
+    auto rms_about_mean = [](const std::vector<double>& x) {
+      const double m = stats::mean(x);
+      double q = 0;
+      for (double v : x) q += (v - m) * (v - m);
+      return x.empty() ? 0.0 : std::sqrt(q / static_cast<double>(x.size()));
+    };
+    std::vector<double> yv;
+    for (const auto& bl : blocks)
+      for (std::size_t i = bl.begin; i < bl.end; ++i) yv.push_back(d.segments[bl.seg].y[i]);
+    out.target_rms = rms_about_mean(yv);
+    Eigen::Index c0 = p0;
+    for (const auto& cols : accepted_cols) {
+      std::vector<double> term;
+      for (const auto& bl : blocks)
+        for (std::size_t i = bl.begin; i < bl.end; ++i) {
+          double v = 0;
+          for (std::size_t j = 0; j < cols[bl.seg].size(); ++j) v += th(c0 + static_cast<Eigen::Index>(j)) * cols[bl.seg][j][i];
+          term.push_back(v);
+        }
+      c0 += static_cast<Eigen::Index>(cols.front().size());
+      out.contribution_rms.push_back(rms_about_mean(term));
+    }
   }
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   say("done in " + std::to_string(out.seconds) + " s");

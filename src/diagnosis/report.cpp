@@ -24,6 +24,7 @@ nlohmann::json jparam(const ParamEstimate& p) {
   if (p.has_bounds) {
     j["plausible"] = {p.plausible_lo, p.plausible_hi};
     j["within_plausible"] = p.plausible();
+    if (p.shape) j["at_edge_of_search"] = p.at_edge();
   }
   return j;
 }
@@ -103,7 +104,12 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
     o << "  held-out gain (1 - SSE_after/SSE_before) " << interval(d.heldout_gain) << "\n";
     o << "  extended model, parameters (block bootstrap):\n";
     for (const auto& p : d.final_params)
-      o << "    " << p.name << " = " << interval(p.est) << " " << p.unit << (p.plausible() ? "" : "  OUTSIDE plausible range") << "\n";
+      o << "    " << p.name << " = " << interval(p.est) << " " << p.unit << (p.plausible() ? "" : "  OUTSIDE plausible range")
+        << (p.at_edge() ? "  AT THE EDGE of the search range (" + g4(p.plausible_lo) + "-" + g4(p.plausible_hi) + ")" : "") << "\n";
+    o << "  share of the torque (RMS of the term / RMS of the measured torque " << g4(d.target_rms) << "):\n";
+    for (std::size_t a = 0; a < d.accepted.size() && a < d.contribution_rms.size(); ++a)
+      o << "    " << d.accepted[a] << ": RMS " << g4(d.contribution_rms[a]) << " (" << fmt("%.1f", 100.0 * d.contribution_rms[a] / d.target_rms)
+        << " %)\n";
     o << "  intrinsic impedance before -> after modelling the cause:\n";
     for (const char* n : {"I", "B", "K"}) {
       const auto* b = d.find_baseline(n);
@@ -162,6 +168,8 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
   j["final"]["heldout_vaf"] = jint(d.final_heldout.vaf);
   j["final"]["heldout_nrmse"] = jint(d.final_heldout.nrmse);
   j["final"]["heldout_gain"] = jint(d.heldout_gain);
+  j["final"]["target_rms"] = d.target_rms;
+  j["final"]["contribution_rms"] = d.contribution_rms;
   j["final"]["params"] = nlohmann::json::array();
   for (const auto& p : d.final_params) j["final"]["params"].push_back(jparam(p));
   j["seconds"] = d.seconds;

@@ -2,6 +2,8 @@
 // The diagnosis engine: baseline fit, misfit signatures, mechanism search by
 // cross-validation over contiguous blocks with a guard gap, greedy extension,
 // and the measured gain with block-bootstrap intervals (docs/diagnosis.md).
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -34,8 +36,14 @@ struct ParamEstimate {
   Interval est;
   double plausible_lo = 0.0, plausible_hi = 0.0;
   bool has_bounds = false;
+  bool shape = false;  // searched on a grid bounded by [plausible_lo, plausible_hi]
   [[nodiscard]] bool plausible() const {
     return !has_bounds || (est.value >= plausible_lo && est.value <= plausible_hi);
+  }
+  // A shape estimate on the edge of its search range: the optimum may lie outside it.
+  [[nodiscard]] bool at_edge() const {
+    const double tol = 1e-9 * std::max(std::fabs(plausible_lo), std::fabs(plausible_hi));
+    return shape && (std::fabs(est.value - plausible_lo) <= tol || std::fabs(est.value - plausible_hi) <= tol);
   }
 };
 
@@ -90,6 +98,10 @@ struct Diagnosis {
   std::vector<ParamEstimate> final_params;  // base then each accepted mechanism's shape params and gains
   HeldOut final_heldout;
   Interval heldout_gain;                    // 1 - SSE_after / SSE_before over held-out folds
+  // RMS (about its mean) of each accepted mechanism's term in the extended
+  // model, and of the target: "how much of the torque is the reflex".
+  std::vector<double> contribution_rms;
+  double target_rms = 0.0;
   double seconds = 0.0;
   [[nodiscard]] bool misfit_found() const { return !accepted.empty(); }
   [[nodiscard]] const ParamEstimate* find_final(const std::string& name) const;
