@@ -68,6 +68,25 @@ TEST_CASE("each hidden mechanism at the middle magnitude is found, named first a
   }
 }
 
+TEST_CASE("a wrong configured inertia is named when the baseline fixes it", "[diagnosis][engine]") {
+  synthetic::Options o;
+  o.seed = 31;
+  const auto g = synthetic::generate(o);
+  SingleJointOptions sj;
+  sj.inertia_fixed = true;
+  sj.fixed_inertia_kgm2 = g.truth.I + 0.01;  // configured 10 g m^2 too heavy: dI = -0.01 kg m^2
+  const auto prep = prepare_single_joint(g.record, sj);
+  EngineOptions eo;
+  eo.bootstrap = 50;
+  const auto d = diagnose(prep.data, standard_library(), eo);
+  REQUIRE(d.misfit_found());
+  CHECK(d.accepted.front() == "wrong_inertia");
+  REQUIRE(d.find_final("dI"));
+  CHECK(d.find_final("dI")->est.value == Approx(-0.01).epsilon(0.2));
+  CHECK(test::rel_err(d.find_final("K")->est.value, g.truth.K) < 0.10);
+  CHECK(test::rel_err(d.find_final("B")->est.value, g.truth.B) < 0.20);
+}
+
 TEST_CASE("a record too short for cross-validation is refused with what is needed", "[diagnosis][engine]") {
   synthetic::Options o;
   o.duration_s = 8.0;
