@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -243,7 +244,7 @@ std::vector<double> residual(const Dataset& d, const Model& m, const std::vector
 }
 
 // Misfit signatures of a residual (see docs/diagnosis.md, "Signatures").
-Signatures signatures(const Dataset& d, const std::vector<Block>& blocks, const std::vector<double>& r,
+Signatures signatures(const Dataset& d, const std::vector<Block>& /*blocks*/, const std::vector<double>& r,
                       const std::vector<std::pair<std::size_t, std::size_t>>& where, double alpha) {
   Signatures s;
   const std::size_t n = r.size();
@@ -341,7 +342,6 @@ Signatures signatures(const Dataset& d, const std::vector<Block>& blocks, const 
     best.significant = std::fabs(best.rho) > best.bound;
     s.xcorr.push_back(best);
   }
-  (void)blocks;
   return s;
 }
 
@@ -369,8 +369,12 @@ std::vector<Block> make_blocks(const Dataset& d, const EngineOptions& opt, std::
   const std::size_t lo = g.first + history;
   const double need_s = static_cast<double>(history + static_cast<std::size_t>(K) * (minfold + guard) + (g.y.size() - g.last) + g.first) * d.dt_s;
   if (lo >= g.last || (g.last - lo) < static_cast<std::size_t>(K) * (minfold + guard))
-    throw InputError(d.source + ": record too short for " + std::to_string(K) + "-fold cross-validation: " +
-                     std::to_string(static_cast<double>(g.y.size()) * d.dt_s) + " s, need at least " + std::to_string(need_s) + " s");
+  {
+    char msg[160];
+    std::snprintf(msg, sizeof msg, ": record too short for %d-fold cross-validation: %.1f s, need at least %.1f s", K,
+                  static_cast<double>(g.y.size()) * d.dt_s, need_s);
+    throw InputError(d.source + msg);
+  }
   const std::size_t L = g.last - lo;
   for (int k = 0; k < K; ++k) {
     std::size_t a = lo + L * static_cast<std::size_t>(k) / static_cast<std::size_t>(K);
@@ -484,7 +488,6 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       }
       say("round " + std::to_string(round + 1) + ": scoring " + cs.id);
       const auto grid = mech.grid(d);
-      const std::size_t S = grid.size();
       // Per setting: train/test stats per fold (sums of the per-block cross statistics).
       std::vector<double> best_tr(static_cast<std::size_t>(opt.folds), std::numeric_limits<double>::infinity());
       std::vector<double> best_te_sse(static_cast<std::size_t>(opt.folds), 0.0);
@@ -522,7 +525,6 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
             best_te_sse[ku] = sse_of(augment(te_fold[ku], cfold[ku]), tk);
           }
         }
-        (void)S;
       });
       for (int k = 0; k < opt.folds; ++k) {
         const auto ku = static_cast<std::size_t>(k);

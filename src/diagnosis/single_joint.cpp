@@ -51,7 +51,6 @@ SingleJointRecord read_single_joint_csv(const std::string& path) {
   double dt_header = 0.0;
   bool have_dt_header = false;
   int col_t = -1, col_p = -1, col_q = -1, ncols = -1;
-  bool header_seen = false;
   std::vector<double> time;
   std::string line;
   int lineno = 0;
@@ -85,7 +84,6 @@ SingleJointRecord read_single_joint_csv(const std::string& path) {
           *slot = i;
         }
         if (col_p < 0 || col_q < 0) fail("header must name pos_rad and torque_nm");
-        header_seen = true;
         continue;
       }
       ncols = static_cast<int>(f.size());
@@ -111,7 +109,6 @@ SingleJointRecord read_single_joint_csv(const std::string& path) {
     rec.pos_rad.push_back(v[col_p]);
     rec.torque_nm.push_back(v[col_q]);
   }
-  (void)header_seen;
   if (rec.pos_rad.size() < 2) throw InputError(path + ": no data rows (need position and torque samples)");
   if (col_t >= 0) {
     const double dt = (time.back() - time.front()) / static_cast<double>(time.size() - 1);
