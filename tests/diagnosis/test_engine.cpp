@@ -87,6 +87,45 @@ TEST_CASE("a wrong configured inertia is named when the baseline fixes it", "[di
   CHECK(test::rel_err(d.find_final("B")->est.value, g.truth.B) < 0.20);
 }
 
+TEST_CASE("engine API: a dataset of many segments (trials) is cross-validated by groups of segments", "[diagnosis][engine]") {
+  // The manipulandum front end will hand over one segment per trial; here a
+  // reflex record is cut into 12 separate 6 s segments, each with its own
+  // smoothing and history, and the folds group neighbouring segments.
+  synthetic::Options o;
+  o.hidden = synthetic::Hidden::reflex;
+  o.magnitude = 0.4;
+  o.seed = 3;
+  o.duration_s = 72.0;
+  const auto g = synthetic::generate(o);
+  Dataset d;
+  const std::size_t per = g.record.pos_rad.size() / 12;
+  for (std::size_t k = 0; k < 12; ++k) {
+    SingleJointRecord piece;
+    piece.source = "piece";
+    piece.dt_s = g.record.dt_s;
+    piece.pos_rad.assign(g.record.pos_rad.begin() + static_cast<long>(k * per), g.record.pos_rad.begin() + static_cast<long>((k + 1) * per));
+    piece.torque_nm.assign(g.record.torque_nm.begin() + static_cast<long>(k * per), g.record.torque_nm.begin() + static_cast<long>((k + 1) * per));
+    SingleJointOptions sj;
+    sj.torque_sign = g.truth.torque_sign;
+    auto prep = prepare_single_joint(piece, sj);
+    prep.data.segments.front().t0_s = static_cast<double>(k * per) * g.record.dt_s;
+    if (k == 0) {
+      d = prep.data;
+    } else {
+      d.segments.push_back(prep.data.segments.front());
+    }
+  }
+  d.source = "segments";
+  EngineOptions eo;
+  eo.bootstrap = 30;
+  const auto r = diagnose(d, standard_library(), eo);
+  CHECK(r.blocks == 12);
+  REQUIRE(r.misfit_found());
+  CHECK(r.accepted.front() == "stretch_reflex");
+  CHECK(test::rel_err(r.find_final("delay")->est.value, g.truth.delay_s) < 0.20);
+  CHECK(test::rel_err(r.find_final("K")->est.value, g.truth.K) < 0.10);
+}
+
 TEST_CASE("a record too short for cross-validation is refused with what is needed", "[diagnosis][engine]") {
   synthetic::Options o;
   o.duration_s = 8.0;
