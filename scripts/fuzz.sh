@@ -18,8 +18,9 @@ jobs=${MANIP_FUZZ_JOBS:-2}
 
 launcher=()
 if command -v ccache >/dev/null; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+mkdir -p "$build"
 cmake -S "$root/fuzz" -B "$build" -G Ninja -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
-  "${launcher[@]}" >"$build.cmake.log" 2>&1 || { cat "$build.cmake.log"; exit 1; }
+  "${launcher[@]}" >"$build/cmake.log" 2>&1 || { cat "$build/cmake.log"; exit 1; }
 ninja -C "$build" -j"$jobs"
 
 names=("$@")
