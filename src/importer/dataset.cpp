@@ -26,7 +26,8 @@ const Variable* Dataset::find(const std::string& name) const {
 std::string Dataset::names() const {
   std::string s;
   int n = 0;
-  for (const auto& [k, v] : variables) {
+  for (const auto& k : order) {
+    if (!variables.count(k)) continue;
     if (n++ == 30) return s + ", ...";
     s += (s.empty() ? "" : ", ") + k;
   }
@@ -140,6 +141,7 @@ Dataset read_csv(const std::string& path) {
     v.rows = cols[i].size();
     v.cols = 1;
     v.data = std::move(cols[i]);
+    ds.order.push_back(v.name);
     ds.variables.emplace(v.name, std::move(v));
   }
   return ds;
@@ -249,6 +251,7 @@ void add_variable(Dataset& ds, const std::string& name, matvar_t* v, int depth) 
     ds.unusable[name] = "numeric of a type that cannot be read";
     return;
   }
+  ds.order.push_back(name);
   ds.variables.emplace(name, std::move(out));
 }
 

@@ -24,13 +24,14 @@ struct Dataset {
   std::string path;
   std::string format;  // "CSV", "MAT v5", "MAT v7.3"
   std::map<std::string, Variable> variables;
+  std::vector<std::string> order;  // names as they appear in the file (for messages)
   // Variables present but not numeric matrices (cell, char, sparse, complex,
   // struct arrays, N-d): name -> what they are, so a mapping that names one
   // is told why it cannot be used rather than "not found".
   std::map<std::string, std::string> unusable;
 
   [[nodiscard]] const Variable* find(const std::string& name) const;
-  // "a, b, c" (first 30 names) for messages.
+  // "a, b, c" (first 30 names, in file order) for messages.
   [[nodiscard]] std::string names() const;
 };
 
