@@ -15,10 +15,14 @@ int main(int argc, char** argv) {
   CLI::App app{"manip_import " + std::string(manip::kVersion) +
                ": convert a recording of another rig (MAT v5/v7.3 or CSV) into a manip session log through a YAML "
                "mapping (docs/import.md, config/import-example.yaml)."};
-  app.footer(std::string("Exit codes: 0 ok; ") + ec::name(ec::kUsage) + "; " + ec::name(ec::kConfig) +
-             ": the mapping is invalid or does not fit the data (file:line: key: reason); " + ec::name(ec::kInput) +
-             ": the recording cannot be read or is unusable; " + ec::name(ec::kOutput) + "; " +
-             ec::name(ec::kInternal) + ".");
+  auto row = [](int code, const std::string& what) {
+    return "\n  " + std::to_string(code) + "  " + ec::name(code) + (what.empty() ? "" : ": " + what);
+  };
+  app.footer("Exit codes:" + row(ec::kOk, "log written") + row(ec::kUsage, "bad command line") +
+             row(ec::kConfig, "the mapping is invalid or does not fit the data (file:line: key: reason)") +
+             row(ec::kInput, "the recording cannot be read or is unusable (e.g. time not increasing)") +
+             row(ec::kOutput, "the output exists (no --force) or cannot be written; nothing is left behind") +
+             row(ec::kInternal, "a bug: please report it"));
   std::string mapping, input, out;
   bool force = false;
   app.add_option("mapping", mapping, "YAML mapping (what is what in the recording)")->required();

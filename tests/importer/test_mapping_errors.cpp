@@ -331,3 +331,15 @@ TEST_CASE("importer: the MAT reader converts every numeric class and 1x1 structs
     CHECK(x->at(0, 1) == 8.0);
   }
 }
+
+TEST_CASE("importer: the example mappings in config/ are valid") {
+  int n = 0;
+  for (const auto& e : std::filesystem::directory_iterator(std::string(MANIP_SOURCE_DIR) + "/config")) {
+    const auto name = e.path().filename().string();
+    if (name.rfind("import-", 0) != 0 || e.path().extension() != ".yaml") continue;
+    INFO(name);
+    CHECK_NOTHROW(importer::load_mapping(e.path().string()));
+    ++n;
+  }
+  CHECK(n >= 2);
+}
