@@ -39,7 +39,10 @@ int main(int argc, char** argv) {
     const auto s = manip::importer::import_session(mapping, input, out, force);
     std::cerr << "manip_import: wrote " << out << " from " << input << " (" << s.input_format << "): " << s.samples
               << " samples at " << s.sample_rate_hz << " Hz (" << s.duration_s << " s), " << s.trials << " trials, "
-              << s.perturbed << " perturbed\n";
+              << s.perturbed << " perturbed\n"
+              << "manip_import: hand at trial start / end, mean, shoulder frame: (" << s.mean_start_shoulder_m(0) << ", "
+              << s.mean_start_shoulder_m(1) << ") m / (" << s.mean_end_shoulder_m(0) << ", " << s.mean_end_shoulder_m(1)
+              << ") m (a reach runs along +x2; if not, check `frame`)\n";
     for (const auto& note : s.notes) std::cerr << "manip_import: note: " << note << "\n";
     return ec::kOk;
   } catch (const manip::Error& e) {

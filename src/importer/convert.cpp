@@ -387,7 +387,11 @@ ImportSummary convert(const Mapping& m, const Dataset& ds, logging::SessionHandl
     if (inside && i == spans[k].end) event(spans[k], manip::trial_event_t::END, i);
   }
   sum.trials = static_cast<int>(spans.size());
-  for (const auto& s : spans) sum.perturbed += s.onset ? 1 : 0;
+  for (const auto& s : spans) {
+    sum.perturbed += s.onset ? 1 : 0;
+    sum.mean_start_shoulder_m += m.frame.point_to_shoulder(x_ws[s.start]) / static_cast<double>(spans.size());
+    sum.mean_end_shoulder_m += m.frame.point_to_shoulder(x_ws[s.end]) / static_cast<double>(spans.size());
+  }
   return sum;
 }
 

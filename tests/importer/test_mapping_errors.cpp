@@ -142,6 +142,15 @@ TEST_CASE("importer: a hand-made recording imports to what was put in") {
   CHECK(sum.sample_rate_hz == 1000.0);
   CHECK(sum.trials == 2);
   CHECK(sum.perturbed == 1);
+  {  // the frame check printed by manip_import: workspace (y, -x) mm -> m, + origin (0, 0.425)
+    const auto r = rows();
+    const double sx = 0.5 * (r[500].y_mm + r[2200].y_mm) / 1000.0;
+    const double sy = 0.5 * (-r[500].x_mm - r[2200].x_mm) / 1000.0 + 0.425;
+    CHECK(sum.mean_start_shoulder_m(0) == Approx(sx).epsilon(1e-12));
+    CHECK(sum.mean_start_shoulder_m(1) == Approx(sy).epsilon(1e-12));
+    const double ex = 0.5 * (r[1999].y_mm + r[3799].y_mm) / 1000.0;
+    CHECK(sum.mean_end_shoulder_m(0) == Approx(ex).epsilon(1e-12));
+  }
   Collector c;
   logging::read_log(f.out, c);
   CHECK(c.session.sample_rate_hz == 1000.0);

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "manip/common/types.hpp"
 #include "manip/importer/dataset.hpp"
 #include "manip/importer/mapping.hpp"
 #include "manip/logging/session_stream.hpp"
@@ -25,6 +26,9 @@ struct ImportSummary {
   double duration_s{0.0};
   int trials{0};
   int perturbed{0};
+  // Mean hand position at the trials' first and last samples, shoulder frame:
+  // a check of the frame mapping (a reach runs along +x2, ~0.30 -> 0.55 m).
+  Vec2 mean_start_shoulder_m{Vec2::Zero()}, mean_end_shoulder_m{Vec2::Zero()};
   std::vector<std::string> notes;  // things worth telling the user (one line each)
 };
 
