@@ -290,6 +290,20 @@ ImportSummary convert(const Mapping& m, const Dataset& ds, logging::SessionHandl
     }
   }
 
+  // Non-finite samples inside a trial make the estimator exclude it; say so
+  // here, where the recording can still be fixed.
+  for (const auto& s : spans) {
+    std::size_t bad = 0, first_bad = 0;
+    for (std::size_t i = s.start; i <= s.end; ++i)
+      if (!x_ws[i].allFinite() || !f_ws[i].allFinite() || !u_ws[i].allFinite()) {
+        if (bad++ == 0) first_bad = i;
+      }
+    if (bad > 0)
+      sum.notes.push_back("trial " + std::to_string(s.number) + ": " + std::to_string(bad) +
+                          " samples with a non-finite position or force (first at sample " +
+                          std::to_string(first_bad + 1) + "); estimate_impedance will exclude this trial");
+  }
+
   // ---- angles (shoulder frame)
   const Mat2 rot = m.frame.rotation();
   const auto pert_samples = static_cast<std::size_t>(std::ceil(m.session.perturbation.duration_s * fs));

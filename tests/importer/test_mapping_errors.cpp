@@ -142,6 +142,7 @@ TEST_CASE("importer: a hand-made recording imports to what was put in") {
   CHECK(sum.sample_rate_hz == 1000.0);
   CHECK(sum.trials == 2);
   CHECK(sum.perturbed == 1);
+  CHECK(sum.notes.empty());
   {  // the frame check printed by manip_import: workspace (y, -x) mm -> m, + origin (0, 0.425)
     const auto r = rows();
     const double sx = 0.5 * (r[500].y_mm + r[2200].y_mm) / 1000.0;
@@ -351,4 +352,14 @@ TEST_CASE("importer: the example mappings in config/ are valid") {
     ++n;
   }
   CHECK(n >= 2);
+}
+
+TEST_CASE("importer: non-finite samples inside a trial are imported and reported") {
+  auto r = rows();
+  r[700].fx = std::nan("");  // trial 0 (samples 500..1999)
+  r[100].x_mm = std::nan("");  // between trials: harmless
+  const auto f = files("nonfinite", mapping(), csv_text(r));
+  const auto sum = importer::import_session(f.map, f.data, f.out, false);
+  REQUIRE(sum.notes.size() == 1);
+  CHECK(sum.notes[0].find("trial 0: 1 samples with a non-finite position or force (first at sample 701)") != std::string::npos);
 }
