@@ -319,10 +319,10 @@ Diff compare(const est::Report& a, const est::Report& b, const std::string& labe
     REQUIRE(sa.method == sb.method);
     REQUIRE(sa.group == sb.group);
     REQUIRE(sa.n_trials == sb.n_trials);
-    if (sa.group != "session" && sa.n_trials < 2 && sa.kind != "pooled fit") continue;
-    score(sa.d_nspm, sb.d_nspm, sa.d_spread, sa.method + " " + sa.group + " D");
-    score(sa.k_npm, sb.k_npm, sa.k_spread, sa.method + " " + sa.group + " K");
-    if (sa.group == "session") {
+    if (!sa.group.is_session() && sa.n_trials < 2 && sa.kind != "pooled fit") continue;
+    score(sa.d_nspm, sb.d_nspm, sa.d_spread, sa.method + " " + sa.group.label() + " D");
+    score(sa.k_npm, sb.k_npm, sa.k_spread, sa.method + " " + sa.group.label() + " K");
+    if (sa.group.is_session()) {
       const double r = std::max(rel(sa.d_nspm, sb.d_nspm), rel(sa.k_npm, sb.k_npm));
       w.session_rel = std::max(w.session_rel, r);
       std::cout << "  " << label << " " << sa.method << " session: D11 " << sa.d_nspm(0, 0) << " vs " << sb.d_nspm(0, 0)
