@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "manip/common/channels.hpp"
+#include "manip/logging/safe_decode.hpp"
 #include "manip/runtime/messages.hpp"
 #include "manip/runtime/rt_thread.hpp"
 
@@ -51,11 +52,20 @@ std::optional<manip::command_status_t> CommandGate::submit(const void* data, int
   st.mode = mode_now;
   st.accepted = false;
   manip::command_t c{};
-  if (size <= 0 || c.decode(data, 0, size) != size) {
+  // Untrusted bytes (LCM is unauthenticated multicast): the generated decode
+  // throws std::length_error on a string length of 0 (issue 9: one 45-byte
+  // packet aborted manip_rt). safe_decode walks the layout first and never
+  // throws; the answer names what is wrong and where.
+  const logging::DecodeResult dr =
+      size > 0 ? logging::safe_decode(data, static_cast<std::size_t>(size), c)
+               : logging::DecodeResult{logging::DecodeStatus::short_data, 0, size};
+  if (!dr) {
     ++rejected_;
     st.seq = -1;
     st.kind = 0;
     st.reason = reject_text(Reject::kUndecodable);
+    st.reason += ": ";
+    st.reason += size > 0 ? dr.message() : "empty payload";
     return st;
   }
   st.seq = c.seq;
@@ -111,7 +121,15 @@ void Bus::publish_session(const manip::session_t& s) { publish(channels::kSessio
 void Bus::publish_fault(const manip::fault_t& f) { publish(channels::kFault, f); }
 
 void Bus::c_on_command(const _lcm_recv_buf_t* rbuf, const char* /*channel*/, void* self) {
-  static_cast<Bus*>(self)->on_command(rbuf->data, static_cast<int>(rbuf->data_size));
+  // No exception may cross liblcm's C frames (that is std::terminate): a
+  // command that makes anything here throw (e.g. bad_alloc) is counted as
+  // rejected and the bus keeps serving.
+  auto* bus = static_cast<Bus*>(self);
+  try {
+    bus->on_command(rbuf->data, static_cast<int>(rbuf->data_size));
+  } catch (...) {
+    bus->handler_errors_.fetch_add(1, std::memory_order_relaxed);
+  }
 }
 
 void Bus::on_command(const void* data, int size) {
@@ -149,7 +167,7 @@ void Bus::publish_health() {
     h.fault_flags = static_cast<std::int32_t>(s.fault_flags.load(std::memory_order_relaxed));
     h.logger_drops = s.log_drops.load(std::memory_order_relaxed);
     h.publisher_drops = s.bus_drops.load(std::memory_order_relaxed);
-    h.command_rejects = s.commands_rejected.load(std::memory_order_relaxed) + gate_.rejected();
+    h.command_rejects = s.commands_rejected.load(std::memory_order_relaxed) + command_rejects();
   }
   if (links_.timing) {
     const TimingSnapshot t = links_.timing->snapshot();

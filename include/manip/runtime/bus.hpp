@@ -95,7 +95,12 @@ class Bus {
   [[nodiscard]] const CommandGate& gate() const { return gate_; }
   [[nodiscard]] std::int64_t published_states() const { return published_states_; }
   [[nodiscard]] std::int64_t publish_errors() const { return publish_errors_; }
-  [[nodiscard]] std::int64_t command_rejects() const { return gate_.rejected(); }
+  // Commands refused on the bus side (undecodable, invalid, loop queue full)
+  // plus commands whose handling threw (counted, never propagated).
+  [[nodiscard]] std::int64_t command_rejects() const {
+    return gate_.rejected() + handler_errors_.load(std::memory_order_relaxed);
+  }
+  [[nodiscard]] std::int64_t commands_received() const { return gate_.received(); }
 
  private:
   static void c_on_command(const _lcm_recv_buf_t* rbuf, const char* channel, void* self);
@@ -112,6 +117,7 @@ class Bus {
   std::int64_t next_health_ns_{0};
   std::int64_t published_states_{0};
   std::int64_t publish_errors_{0};
+  std::atomic<std::int64_t> handler_errors_{0};
 };
 
 }  // namespace manip::runtime
