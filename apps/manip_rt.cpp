@@ -87,10 +87,10 @@ int main(int argc, char** argv) {
             try {
               d = std::stod(v, &used);
             } catch (const std::exception&) {
-              return "--duration: not a number: '" + v + "'";
+              return "not a number: '" + v + "'";
             }
             if (used != v.size() || !std::isfinite(d) || d < 0.0)
-              return "--duration: must be a finite number of seconds >= 0 (got '" + v + "')";
+              return "must be a finite number of seconds >= 0 (got '" + v + "')";
             return {};
           },
           "SECONDS >= 0"));
