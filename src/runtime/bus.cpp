@@ -2,8 +2,14 @@
 
 #include <lcm/lcm-cpp.hpp>
 
+#include <dirent.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <set>
 
 #include "manip/common/channels.hpp"
 #include "manip/logging/safe_decode.hpp"
@@ -182,8 +188,55 @@ void Bus::publish_health() {
   if (links_.to_logger) links_.to_logger->push_growing(AuxRecord(h));
 }
 
+std::int64_t udp_socket_drops() {
+  // Inodes of this process's sockets, then their drop counters in the
+  // (network-namespace-local) UDP table.
+  std::set<unsigned long> inodes;
+  if (DIR* d = ::opendir("/proc/self/fd")) {
+    while (const dirent* e = ::readdir(d)) {
+      char link[300], target[128];
+      std::snprintf(link, sizeof link, "/proc/self/fd/%s", e->d_name);
+      const ssize_t n = ::readlink(link, target, sizeof target - 1);
+      if (n <= 0) continue;
+      target[n] = '\0';
+      unsigned long ino = 0;
+      if (std::sscanf(target, "socket:[%lu]", &ino) == 1) inodes.insert(ino);
+    }
+    ::closedir(d);
+  }
+  std::int64_t drops = 0;
+  for (const char* table : {"/proc/self/net/udp", "/proc/self/net/udp6"}) {
+    std::FILE* f = std::fopen(table, "r");
+    if (!f) continue;
+    char line[512];
+    if (!std::fgets(line, sizeof line, f)) {  // header
+      std::fclose(f);
+      continue;
+    }
+    while (std::fgets(line, sizeof line, f)) {
+      // sl local rem st tx:rx tr:when retrnsmt uid timeout inode ref pointer drops
+      unsigned long ino = 0;
+      long long dr = 0;
+      char skip[8][64];
+      if (std::sscanf(line, " %63s %63s %63s %63s %63s %63s %63s %63s %*s %lu %*s %*s %lld", skip[0], skip[1],
+                      skip[2], skip[3], skip[4], skip[5], skip[6], skip[7], &ino, &dr) == 10 &&
+          inodes.count(ino))
+        drops += dr;
+    }
+    std::fclose(f);
+  }
+  return drops;
+}
+
 void Bus::poll(int timeout_ms) {
-  if (lcm_) lcm_->handleTimeout(timeout_ms);
+  if (lcm_) {
+    // lcm handles one message per call: under a flood, take what is queued
+    // (bounded, so live state and health still go out) instead of one per
+    // poll, or LCM's subscription queue and the socket buffer overflow and
+    // commands are lost unanswered.
+    int handled = lcm_->handleTimeout(timeout_ms) > 0 ? 1 : 0;
+    while (handled > 0 && handled < kMaxMessagesPerPoll && lcm_->handleTimeout(0) > 0) ++handled;
+  }
   drain_loop();
   const std::int64_t now = mono_ns();
   if (now >= next_health_ns_) {

@@ -62,7 +62,11 @@ std::string RunReport::summary() const {
      << remaining_slots << " schedule slots left\n";
   os << "  timing: " << timing.summary() << "\n";
   os << "  queues: log drops " << log_drops << ", live-bus drops " << bus_drops << "; commands received on the bus "
-     << commands_received << ", accepted " << commands_accepted << ", rejected " << commands_rejected << "\n";
+     << commands_received << ", accepted " << commands_accepted << ", rejected " << commands_rejected;
+  if (bus_packets_dropped > 0)
+    os << "; " << bus_packets_dropped
+       << " LCM packets dropped by the kernel before manip_rt could read them (socket buffer full: a flood)";
+  os << "\n";
   os << "  log: " << log.states << " states (cycles " << log.first_cycle << ".." << log.last_cycle << "), "
      << log.missing_cycles << " missing cycles, " << log.events << " other events, " << log.faults
      << " fault records, " << log.events_in_file << " events in the file";
@@ -319,6 +323,7 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
   backend.shutdown();
   rep.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
 
+  if (bus) rep.bus_packets_dropped = udp_socket_drops();  // before the bus (and its socket) goes
   bus_stop.store(true, std::memory_order_release);
   if (bus_thread.joinable()) bus_thread.join();
   logger_stop.store(true, std::memory_order_release);

@@ -67,6 +67,13 @@ class CommandGate {
   std::int64_t received_{0}, rejected_{0};
 };
 
+// Datagrams the kernel dropped on this process's UDP sockets (receive buffer
+// full), from /proc/self/net/udp: under a command flood the packets lost
+// before manip_rt could read them (LCM's udpm socket also receives manip_rt's
+// own publications, so this counts all of them). -1 is never returned; 0 if
+// the table is unreadable.
+std::int64_t udp_socket_drops();
+
 class Bus {
  public:
   struct Links {
@@ -109,6 +116,7 @@ class Bus {
   template <class Msg>
   void publish(const char* channel, const Msg& m);
 
+  static constexpr int kMaxMessagesPerPoll = 256;
   RtConfig cfg_;
   Links links_;
   std::unique_ptr<lcm::LCM> lcm_;

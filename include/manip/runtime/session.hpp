@@ -79,6 +79,7 @@ struct RunReport {
   std::int64_t log_drops{0}, bus_drops{0};
   std::int64_t commands_accepted{0}, commands_rejected{0};
   std::int64_t commands_received{0};  // on the bus (decodable or not)
+  std::int64_t bus_packets_dropped{0};  // kernel drops on the LCM socket (udp_socket_drops)
   int signal{0};                      // the signal that interrupted the run, 0 if none
   std::uint32_t fault_flags{0};
   control::Protocol::Counters trials{};
