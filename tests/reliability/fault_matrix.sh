@@ -28,6 +28,15 @@ ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev
 URL='udpm://239.255.76.67:7667?ttl=0'
 W=$(mktemp -d /tmp/manip_fault_matrix.XXXXXX)
 trap 'umount "$W/full" 2>/dev/null; rm -rf "$W"' EXIT
+# The matrix tests what hostile input, signals and files do, not the host's
+# timing: on a shared CI machine or a VM an overrun fault (3 late cycles in a
+# row) would make the exit codes flaky, so the overrun limits are relaxed in a
+# copy of the config (latency under a storm is measured separately:
+# docs/reliability.md).
+sed -e 's/^\(  overrun_fault_consecutive:\) *[0-9]*/\1 100000/' \
+    -e 's/^\(  overrun_fault_per_second:\) *[0-9]*/\1 100000/' "$CFG" >"$W/rt.yaml"
+grep -q "overrun_fault_consecutive: 100000" "$W/rt.yaml" || { echo "cannot relax the overrun limits in $CFG"; exit 1; }
+CFG=$W/rt.yaml
 SHUTDOWN=40   # safety.shutdown_cycles in config/rt.yaml: STOPPED cycles at the end of every orderly stop
 FAIL=0
 ROWS=()
