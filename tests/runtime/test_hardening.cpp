@@ -10,13 +10,19 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <ostream>
+#include <streambuf>
 #include <string>
 #include <vector>
 
 #include "manip/command_t.hpp"
 #include "manip/common/errors.hpp"
+#include "manip/logging/event_log.hpp"
+#include "manip/runtime/backends.hpp"
 #include "manip/runtime/bus.hpp"
 #include "manip/runtime/logger.hpp"
+#include "manip/runtime/session.hpp"
+#include "manip/state_t.hpp"
 
 using manip::command_t;
 using namespace manip::control;
@@ -165,4 +171,49 @@ TEST_CASE("logger: discard() after a failed start leaves no stub log", "[logger]
   REQUIRE(std::filesystem::exists(path));
   lg.discard();
   CHECK_FALSE(std::filesystem::exists(path));
+}
+
+namespace {
+// A stream whose every write fails, with exceptions on: what a supervisor
+// thread meets when something it calls throws.
+struct FailingBuf : std::streambuf {
+  int overflow(int) override { return traits_type::eof(); }
+  std::streamsize xsputn(const char*, std::streamsize) override { return 0; }
+};
+}  // namespace
+
+TEST_CASE("session: an exception in a helper thread is an orderly safe stop with exit 70, not terminate",
+          "[session][hardening]") {
+  RtConfig cfg;
+  auto backend = make_backend("sim", cfg);
+  const std::string path = temp_path("internal.lcm");
+  std::filesystem::remove(path);
+  std::atomic<bool> interrupt{true};  // the supervisor writes its message at once...
+  FailingBuf buf;
+  std::ostream out(&buf);
+  out.exceptions(std::ios::badbit);  // ...and that write throws
+  RunOptions opt;
+  opt.log_path = path;
+  opt.lcm_url = "none";
+  opt.quiet = true;
+  opt.interrupt = &interrupt;
+  const RunReport rep = run_session(cfg, *backend, opt, out);
+  INFO(rep.message);
+  CHECK(rep.exit_code == manip::exit_code::kInternal);
+  CHECK(rep.message.find("supervisor") != std::string::npos);
+  // the safe stop happened and the log is complete: gapless, ends in STOPPED
+  manip::logging::EventLogReader rd(path);
+  manip::logging::RawEvent ev;
+  std::int64_t last = -1, gaps = 0, stopped_tail = 0;
+  while (rd.next(ev)) {
+    if (ev.channel != "MANIP_STATE") continue;
+    manip::state_t s;
+    REQUIRE(manip::logging::decode(ev, s));
+    if (last >= 0 && s.cycle != last + 1) ++gaps;
+    last = s.cycle;
+    stopped_tail = s.mode == manip::state_t::MODE_STOPPED ? stopped_tail + 1 : 0;
+  }
+  CHECK(gaps == 0);
+  CHECK(stopped_tail >= cfg.safety.shutdown_cycles);
+  std::filesystem::remove(path);
 }
