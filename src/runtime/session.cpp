@@ -1,5 +1,6 @@
 #include "manip/runtime/session.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <csignal>
 #include <mutex>
@@ -162,7 +163,14 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
                               cfg.loop.max_catch_up_cycles};
         rep.cycles = run_paced(body, po, timing);
       } else {
-        QueueBackpressure bp(want_log ? &log_q : nullptr, cfg.loop.log_queue_capacity, want_bus ? &bus_q : nullptr,
+        // As fast as possible, the loop never runs more than one flush
+        // interval (logger.flush_every_cycles) ahead of the logger: a kill -9
+        // then loses at most ~2 x flush_every_cycles cycles, not a whole
+        // queue (65 536 records, 16 s of loop time).
+        const std::size_t log_limit = std::min<std::size_t>(
+            cfg.loop.log_queue_capacity,
+            static_cast<std::size_t>(std::max<long long>(cfg.logger.flush_every_cycles, 0)) + 64 + 64);
+        QueueBackpressure bp(want_log ? &log_q : nullptr, log_limit, want_bus ? &bus_q : nullptr,
                              cfg.loop.bus_queue_capacity);
         rep.cycles = run_as_fast_as_possible(body, timing, &bp);
       }
