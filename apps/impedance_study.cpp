@@ -9,9 +9,11 @@
 #include <iomanip>
 #include <iostream>
 #include <map>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 
+#include "manip/common/errors.hpp"
 #include "manip/estimation/session_estimator.hpp"
 #include "manip/sim/linear_human.hpp"
 #include "manip/sim/presets.hpp"
@@ -36,10 +38,11 @@ double quantile(std::vector<double> v, double q) {
 }
 const char* kElem[7] = {"D11", "D12", "D21", "D22", "K11", "K12", "K22"};
 double elem(const Mat2& d, const Mat2& k, int e) { return e < 4 ? d(e / 2, e % 2) : (e == 4 ? k(0, 0) : e == 5 ? k(0, 1) : k(1, 1)); }
-}  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App app{"impedance_study: accuracy of every estimator on seeded synthetic sessions with known D, K"};
+  app.footer("Exit codes (common/exit_codes.hpp): 0 ok; 2 bad command line (option, method name); 6 --json cannot be "
+             "written; 70 internal error.");
   int sessions = 20, movements = 32;
   std::string json_path, persons = "table1,stiff", noises = "none,realistic";
   std::uint64_t seed0 = 1000;
@@ -61,7 +64,14 @@ int main(int argc, char** argv) {
   app.add_option("--pem-structure", pem_structure, "prediction error: box-jenkins | armax (default: estimator default)");
   app.add_option("--pem-pre", pem_pre, "prediction error: data before onset [s] (default: estimator default)");
   app.add_option("--oe-prewhiten", prewhiten, "output-error prewhitening AR order (default: estimator default)");
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? exit_code::kOk : exit_code::kUsage;
+  }
+  if (!pem_structure.empty() && pem_structure != "box-jenkins" && pem_structure != "armax")
+    throw UsageError("--pem-structure: must be box-jenkins or armax");
   auto split = [](const std::string& s) {
     std::vector<std::string> out;
     std::stringstream ss(s);
@@ -83,7 +93,7 @@ int main(int argc, char** argv) {
         d.write_twins = false;
         auto hp = truth_p;
         sim::apply_noise(sim::parse_noise_level(noise), d, hp);
-        hp.sample_rate_hz = d.sample_rate_hz * d.substeps;
+        hp.sample_rate_hz = d.session.sample_rate_hz * d.substeps;
         sim::LinearImpedanceHuman human(hp);
         estimation::EstimatorSettings es;
         es.methods = methods == "all" ? estimation::all_methods() : split(methods);
@@ -92,16 +102,20 @@ int main(int argc, char** argv) {
         if (prewhiten >= 0) es.oe.prewhiten_order = prewhiten;
         if (pem_pre >= 0) es.pem.t_pre_s = pem_pre;
         if (pem_structure == "armax") es.pem.structure = estimation::PemStructure::armax;
-        else if (!pem_structure.empty() && pem_structure != "box-jenkins")
-          throw std::invalid_argument("--pem-structure: must be box-jenkins or armax");
-        estimation::SessionEstimator se(es);
+        std::optional<estimation::SessionEstimator> se_or;
+        try {
+          se_or.emplace(es);
+        } catch (const std::invalid_argument& e) {  // an unknown method name
+          throw UsageError(std::string("--methods: ") + e.what());
+        }
+        auto& se = *se_or;
         estimation::TrialAssembler asmb(
             [&](const estimation::SessionInfo& info, estimation::TrialData&& t) { se.add_trial(info, std::move(t)); });
         sim::run_session(d, human, asmb);
         asmb.finish();
         const auto rep = se.finish(asmb.issues(), asmb.warnings());
         for (const auto& sm : rep.summaries) {
-          if (sm.group != "session") continue;
+          if (!sm.group.is_session()) continue;
           nlohmann::json row = {{"person", person}, {"noise", noise}, {"seed", d.seed}, {"method", sm.method}};
           for (int e = 0; e < 7; ++e) {
             const double v = elem(sm.d_nspm, sm.k_npm, e);
@@ -146,6 +160,23 @@ int main(int argc, char** argv) {
       std::cout.flush();
     }
   }
-  if (!json_path.empty()) std::ofstream(json_path) << raw.dump(1) << "\n";
-  return 0;
+  if (!json_path.empty()) {
+    std::ofstream o(json_path);
+    if (!(o << raw.dump(1) << "\n")) throw OutputError(json_path + ": cannot write JSON");
+  }
+  return exit_code::kOk;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const Error& e) {
+    std::cerr << "impedance_study: " << e.what() << "\n";
+    return e.exit_code();
+  } catch (const std::exception& e) {
+    std::cerr << "impedance_study: internal error: " << e.what() << "\n";
+    return exit_code::kInternal;
+  }
 }

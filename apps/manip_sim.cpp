@@ -15,32 +15,45 @@
 #include "manip/estimation/isolation_model.hpp"
 #include "manip/estimation/report.hpp"
 #include "manip/estimation/validation.hpp"
-#include "manip/sim/linear_human.hpp"
-#include "manip/sim/neuromech_arm.hpp"
+#include "manip/common/errors.hpp"
+#include "manip/sim/human_factory.hpp"
 #include "manip/sim/presets.hpp"
 #include "manip/sim/session_runner.hpp"
 #include "manip/version.hpp"
 
+namespace {
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream f(path);
+  f << text;
+  f.close();
+  if (!f) throw manip::OutputError(path + ": cannot be written");
+}
+}  // namespace
+
 int main(int argc, char** argv) {
   using namespace manip::sim;
+  namespace exit_code = manip::exit_code;
+  std::string models_help;
+  for (const auto& m : human_models()) models_help += (models_help.empty() ? "" : " | ") + m.name + " (" + m.description + ")";
   CLI::App app{"manip_sim " + std::string(manip::kVersion) +
                ": simulate a perturbation session on the ideal admittance and write it as a manip LCM log.\n"
-               "Exit codes: 0 ok; 2 usage or configuration error; 3 the log could not be written."};
+               "Exit codes (docs/exit-codes.md): 0 ok; 2 usage (bad option or value); 3 configuration invalid "
+               "(--arm-config: file:line: key: reason); 6 output cannot be written (log or --validate files)."};
   std::string out = "session.lcm", human = "linear", noise = "realistic", arm_config, person = "table1";
   int movements = 100, reps = 3;
   std::uint64_t seed = 1;
   app.add_option("-o,--out", out, "output LCM log (default session.lcm)");
-  app.add_option("--human", human, "linear (linear endpoint impedance) | neuromech (two-link six-muscle arm, §4.1)");
+  app.add_option("--human", human, "human model: " + models_help);
   app.add_option("--person", person, "linear human: table1 (paper Table 1) | stiff");
   app.add_option("--arm-config", arm_config, "neuromech parameters YAML (default config/arm_model.yaml)");
   std::string feedback = "config";
   app.add_option("--feedback", feedback,
                  "neuromech: config (as in the YAML) | intrinsic (all feedback pathways off: the ground-truth case) | "
                  "short-latency (only the short-latency reflex on)");
-  app.add_option("--noise", noise, "none | realistic (docs/accuracy-study.md)");
+  app.add_option("--noise", noise, "none | quantisation | motor | variability | realistic (docs/accuracy-study.md)");
   app.add_option("--movements", movements, "number of movements (default 100, paper §5.2)");
   app.add_option("--reps", reps, "perturbed repetitions per angle (default 3: 24 perturbed trials)");
-  app.add_option("--seed", seed, "random seed (schedule, noise)");
+  app.add_option("--seed", seed, "random seed (schedule as in manip_rt's protocol.seed, reaches, noise)");
   std::string validate_dir;
   app.add_option("--validate", validate_dir,
                  "after writing, validate against the twin truth (paper §4.3: Fig. 3 PSDs, Fig. 4 NRMSE, max "
@@ -49,54 +62,49 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int rc = app.exit(e);
-    return rc == 0 ? 0 : 2;
+    return rc == 0 ? exit_code::kOk : exit_code::kUsage;
   }
   SessionDesign d;
-  std::unique_ptr<HumanModel> h;
+  BuiltHuman built;
   try {
     d.n_movements = movements;
     d.reps_per_angle = reps;
     d.seed = seed;
-    LinearHumanParams lp = person == "stiff" ? stiff_person() : table1_person();
-    if (person != "stiff" && person != "table1") throw std::invalid_argument("--person must be table1 or stiff");
-    apply_noise(parse_noise_level(noise), d, lp);
-    lp.sample_rate_hz = d.sample_rate_hz * d.substeps;
-    if (human == "linear") {
-      h = std::make_unique<LinearImpedanceHuman>(lp);
-      d.source = "manip_sim/linear";
-    } else if (human == "neuromech") {
-      if (arm_config.empty()) arm_config = std::string(MANIP_SOURCE_DIR) + "/config/arm_model.yaml";
-      auto np = load_neuromech_params(arm_config);
-      if (feedback == "intrinsic") {
-        np.disable_feedback();
-      } else if (feedback == "short-latency") {
-        np.disable_feedback();
-        np.pathway(Pathway::kShortLatency).enabled = true;
-      } else if (feedback != "config") {
-        throw std::invalid_argument("--feedback must be config, intrinsic or short-latency");
-      }
-      // The session runner steps the arm once per cycle (integration.session_step_s)
-      // with the midpoint plant step; integration.step_s is manip_rt's sub-stepped rate.
-      np.step_s = np.session_step_s;
-      // The log's session message must describe the simulated arm (M_BSP a priori).
-      d.anthropometrics = np.anthropometrics;
-      d.substeps = static_cast<int>(std::lround(1.0 / (np.step_s * d.sample_rate_hz)));
-      d.midpoint_plant = true;  // second-order plant step: accurate at the default 4 kHz step
-      h = std::make_unique<NeuromechanicalArm>(np);
-      d.source = "manip_sim/neuromech";
-      d.config_yaml = neuromech_params_to_yaml(np);
-    } else {
-      throw std::invalid_argument("--human must be linear or neuromech");
+    if (person != "stiff" && person != "table1") throw manip::UsageError("--person must be table1 or stiff");
+    HumanSpec spec;
+    spec.model = human;
+    spec.sample_rate_hz = d.session.sample_rate_hz;
+    spec.linear = person == "stiff" ? stiff_person() : table1_person();
+    spec.feedback = feedback;
+    spec.arm_config = arm_config.empty() && human == "neuromech" ? std::string(MANIP_SOURCE_DIR) + "/config/arm_model.yaml"
+                                                                 : arm_config;
+    NoiseLevel level{};
+    try {
+      level = parse_noise_level(noise);
+    } catch (const std::invalid_argument& e) {
+      throw manip::UsageError(std::string("--noise: ") + e.what());
     }
-    d.session_id = "sim-seed" + std::to_string(seed);
-  } catch (const std::exception& e) {
+    apply_noise(level, d, spec.linear);
+    built = make_human(spec);
+    d.substeps = static_cast<int>(std::lround(1.0 / (built.step_s * d.session.sample_rate_hz)));
+    if (d.substeps < 1) throw manip::UsageError("--human " + human + ": plant step longer than a sample");
+    d.midpoint_plant = built.midpoint_plant;
+    if (built.anthropometrics) d.session.anthropometrics = *built.anthropometrics;
+    d.session.config_yaml = built.config_yaml;
+    d.session.source = "manip_sim/" + human;
+    d.session.session_id = "sim-seed" + std::to_string(seed);
+    (void)perturbation_schedule(d);  // refuses a design that cannot run (e.g. more perturbed trials than movements)
+  } catch (const manip::Error& e) {
     std::cerr << "manip_sim: " << e.what() << "\n";
-    return 2;
+    return e.exit_code();
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "manip_sim: " << e.what() << "\n";
+    return exit_code::kUsage;
   }
   try {
     if (const auto dir = std::filesystem::path(out).parent_path(); !dir.empty()) std::filesystem::create_directories(dir);
     manip::logging::LogWritingHandler w(out);
-    const auto sum = run_session(d, *h, w);
+    const auto sum = run_session(d, *built.model, w);
     w.close();
     auto mean = [](const std::vector<double>& v) {
       return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
@@ -121,7 +129,7 @@ int main(int argc, char** argv) {
       const auto curves_model = est::nrmse_curves(iso.windows, 0.15, 30, "model-based");
       std::filesystem::create_directories(validate_dir);
       std::ostringstream txt;
-      txt << "manip_sim validation of " << out << " (" << d.source << ", seed " << seed << ")\n"
+      txt << "manip_sim validation of " << out << " (" << d.session.source << ", seed " << seed << ")\n"
           << "max deviation in [0, " << d.t_est_s * 1000 << "] ms, mean (std) over " << sum.max_dev_x1_m.size()
           << " perturbed trials: x1 ";
       auto ms = [](const std::vector<double>& v) {
@@ -137,19 +145,23 @@ int main(int argc, char** argv) {
           << "movements), first frequency with perturbed/unperturbed > 3 dB: " << rep.psd.cutoff_auto_hz << " Hz\n"
           << est::format_text(curves) << est::format_text(curves_model) << "\n"
           << est::format_text(rep, out);
-      std::ofstream(validate_dir + "/validation.txt") << txt.str();
+      write_text(validate_dir + "/validation.txt", txt.str());
       nlohmann::json j = {{"nrmse", est::to_json(curves)}, {"nrmse_model_based", est::to_json(curves_model)},
                           {"estimate", est::to_json(rep, out)},
                           {"max_dev_x1_m", sum.max_dev_x1_m}, {"max_dev_x2_m", sum.max_dev_x2_m}};
-      std::ofstream(validate_dir + "/validation.json") << j.dump(1) << "\n";
+      write_text(validate_dir + "/validation.json", j.dump(1) + "\n");
       est::write_nrmse_plot(curves, validate_dir + "/fig4_nrmse.svg");
       est::write_nrmse_plot(curves_model, validate_dir + "/fig4_nrmse_model_based.svg");
       est::write_plots(rep, validate_dir);
       std::cout << txt.str();
     }
-  } catch (const std::exception& e) {
+  } catch (const manip::Error& e) {
     std::cerr << "manip_sim: " << e.what() << "\n";
-    return 3;
+    return e.exit_code();
+  } catch (const std::exception& e) {
+    // The log writer and the report writers throw std::runtime_error naming the file.
+    std::cerr << "manip_sim: " << e.what() << "\n";
+    return exit_code::kOutput;
   }
-  return 0;
+  return exit_code::kOk;
 }

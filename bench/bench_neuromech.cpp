@@ -17,7 +17,6 @@
 //   C: plant at 16 kHz sub-stepping a 1/4 kHz model, explicit: the sim backend if
 //      its start-up check allowed a substep that is a fraction of the model step
 #include <CLI/CLI.hpp>
-#include <Eigen/LU>
 #include <algorithm>
 #include <chrono>
 #include <ctime>
@@ -27,7 +26,9 @@
 #include <vector>
 
 #include "manip/common/perturbation.hpp"
+#include "manip/sim/ideal_admittance.hpp"
 #include "manip/sim/neuromech_arm.hpp"
+#include "manip/sim/session_runner.hpp"
 
 using namespace manip;
 using namespace manip::sim;
@@ -49,7 +50,7 @@ struct Result {
 
 Result run(const NeuromechParams& p, double plant_hz, bool midpoint, int trials) {
   NeuromechanicalArm arm(p);  // allocation happens here, outside the timed loop
-  const Mat2 m_load = Mat2::Identity() * 5.3, d_adm = Mat2::Identity() * 15.0;
+  const PlantParams plant = plant_params(default_sim_session());
   const PerturbationProfile prof;
   const double dt = 1.0 / plant_hz;
   const ReachSpec reach;
@@ -66,15 +67,7 @@ Result run(const NeuromechParams& p, double plant_hz, bool midpoint, int trials)
         if (onset < 0 && arm.hand_position_m().y() >= 0.40) onset = k;
         const Vec2 u = onset >= 0 ? Vec2(amp * prof.force_n(static_cast<double>(k - onset) * dt, angle) / 15.0)
                                   : Vec2::Zero();
-        Mat2 m_x;
-        Vec2 h;
-        if (midpoint)
-          arm.endpoint_dynamics_for_step(dt, m_x, h);
-        else
-          arm.endpoint_dynamics(m_x, h);
-        const Mat2 m = m_x + m_load + (midpoint ? 0.5 * dt : 0.0) * d_adm;
-        const Vec2 xdd = m.inverse() * (h - d_adm * arm.hand_velocity_mps() + u);
-        arm.advance(dt, xdd);
+        step_ideal_admittance(arm, plant, u, dt, midpoint);
       }
       r.checksum += arm.hand_position_m().sum();
       r.sim_s += static_cast<double>(n) * dt;

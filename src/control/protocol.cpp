@@ -10,22 +10,28 @@ namespace manip::control {
 
 std::vector<TrialSpec> make_schedule(const ProtocolConfig& protocol, const PerturbationConfig& perturbation,
                                      int perturbed_count) {
-  PortableRng rng(protocol.seed);
+  return make_schedule(protocol.movements, perturbation.angles_deg, perturbation.repeats_per_angle, perturbed_count,
+                       protocol.seed);
+}
+
+std::vector<TrialSpec> make_schedule(int movements, const std::vector<double>& angles_deg, int repeats_per_angle,
+                                     int perturbed_count, std::uint64_t seed) {
+  PortableRng rng(seed);
   // The full perturbation multiset (each angle `repeats` times), shuffled.
   std::vector<double> angles;
-  for (int r = 0; r < perturbation.repeats_per_angle; ++r)
-    for (double a : perturbation.angles_deg) angles.push_back(a);
+  for (int r = 0; r < repeats_per_angle; ++r)
+    for (double a : angles_deg) angles.push_back(a);
   portable_shuffle(angles.begin(), angles.end(), rng);
   const auto k = static_cast<std::size_t>(std::clamp(perturbed_count, 0, static_cast<int>(angles.size())));
   angles.resize(k);
   // Slots: the first k of a shuffled slot list are perturbed, assigned the
   // shuffled angles in slot order.
-  std::vector<int> slots(static_cast<std::size_t>(protocol.movements));
+  std::vector<int> slots(static_cast<std::size_t>(movements));
   for (std::size_t i = 0; i < slots.size(); ++i) slots[i] = static_cast<int>(i);
   portable_shuffle(slots.begin(), slots.end(), rng);
   std::vector<int> chosen(slots.begin(), slots.begin() + static_cast<long>(std::min(k, slots.size())));
   std::sort(chosen.begin(), chosen.end());
-  std::vector<TrialSpec> out(static_cast<std::size_t>(protocol.movements));
+  std::vector<TrialSpec> out(static_cast<std::size_t>(movements));
   for (std::size_t i = 0; i < chosen.size(); ++i) {
     auto& t = out[static_cast<std::size_t>(chosen[i])];
     t.perturbed = true;

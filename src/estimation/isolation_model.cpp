@@ -148,7 +148,8 @@ ModelIsolation isolate_model_based(const SessionInfo& info, const std::vector<Tr
   out.d_session_nspm = fit.d_nspm;
   out.k_session_npm = fit.k_npm;
   const Vec7 th0 = pack(fit.d_nspm, fit.k_npm);
-  const Mat2 m_dev = info.m_adm_kg + info.m_handle_kg;
+  const Mat2 m_dev = info.m_adm_shoulder_kg() + info.m_handle_shoulder_kg();
+  const Mat2 d_adm = info.d_adm_shoulder_nspm();
   for (std::size_t i = 0; i < ow.size(); ++i) {
     const auto& w = ow[i];
     Vec7 th = th0;
@@ -171,7 +172,7 @@ ModelIsolation isolate_model_based(const SessionInfo& info, const std::vector<Tr
       v.dx[j] = resp.x[on + j];
       v.dxd[j] = resp.xd[on + j];
       v.dxdd[j] = resp.xdd[on + j];
-      v.du_ext_adm[j] = v.u_pert[j] - m_dev * v.dxdd[j] - info.d_adm_nspm * v.dxd[j];  // eq. 21
+      v.du_ext_adm[j] = v.u_pert[j] - m_dev * v.dxdd[j] - d_adm * v.dxd[j];  // eq. 21
     }
     out.d_trial_nspm.push_back(d);
     out.k_trial_npm.push_back(k);

@@ -12,12 +12,11 @@
 #include <stdexcept>
 #include <thread>
 
+#include "manip/common/errors.hpp"
 #include "manip/dsp/dsp.hpp"
 
 namespace manip::estimation {
 namespace {
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 double to_deg(double rad) {
   double d = std::fmod(rad * 180.0 / std::numbers::pi, 360.0);
@@ -25,93 +24,14 @@ double to_deg(double rad) {
   return std::round(d * 1000.0) / 1000.0;
 }
 
-bool per_trial_method(const std::string& m) { return m == "paper" || m == "oe-trial"; }
-
-// Mean (std) over per-trial estimates, laid out like Table 1.
-Summary summarise_trials(const std::string& method, const std::string& group, const std::vector<const TrialResult*>& rs) {
-  Summary s;
-  s.method = method;
-  s.group = group;
-  s.kind = "mean (std) over trials";
-  s.n_trials = static_cast<int>(rs.size());
-  if (rs.empty()) return s;
-  for (const auto* r : rs) {
-    s.d_nspm += r->est.d_nspm;
-    s.k_npm += r->est.k_npm;
-    s.m_kg += r->est.m_kg;
-    if (!r->est.identifiable) ++s.n_flagged_trials;
-  }
-  const double n = static_cast<double>(rs.size());
-  s.d_nspm /= n;
-  s.k_npm /= n;
-  s.m_kg /= n;
-  for (const auto* r : rs) {
-    s.d_spread += (r->est.d_nspm - s.d_nspm).cwiseAbs2();
-    s.k_spread += (r->est.k_npm - s.k_npm).cwiseAbs2();
-  }
-  const double den = std::max(1.0, n - 1.0);
-  s.d_spread = (s.d_spread / den).cwiseSqrt();
-  s.k_spread = (s.k_spread / den).cwiseSqrt();
-  // 95% interval of the mean over trials.
-  const double t = rs.size() > 1 ? t_quantile_975(static_cast<int>(rs.size()) - 1) / std::sqrt(n) : kNaN;
-  s.d_lo = s.d_nspm - t * s.d_spread;
-  s.d_hi = s.d_nspm + t * s.d_spread;
-  s.k_lo = s.k_npm - t * s.k_spread;
-  s.k_hi = s.k_npm + t * s.k_spread;
-  if (rs.size() < 2) {
-    s.identifiable = false;
-    s.flag = "a single trial: no spread";
-  } else {
-    // The same rule as for a single fit, applied to the standard error of the mean.
-    ImpedanceEstimate e;
-    e.d_nspm = s.d_nspm;
-    e.k_npm = s.k_npm;
-    e.d_se = s.d_spread / std::sqrt(n);
-    e.k_se = s.k_spread / std::sqrt(n);
-    flag_identifiability(e);
-    if (!e.identifiable) {
-      s.identifiable = false;
-      s.flag = "standard error of the mean: " + e.flag;
-    }
-  }
-  if (s.n_flagged_trials * 2 > s.n_trials) {
-    s.identifiable = false;
-    s.flag = std::to_string(s.n_flagged_trials) + " of " + std::to_string(s.n_trials) + " trial fits not identifiable";
-  }
-  return s;
-}
-
-Summary summarise_pooled(const std::string& method, const std::string& group, const ImpedanceEstimate& e) {
-  Summary s;
-  s.method = method;
-  s.group = group;
-  s.kind = "pooled fit (" + e.se_kind + ")";
-  s.n_trials = e.n_trials;
-  s.d_nspm = e.d_nspm;
-  s.k_npm = e.k_npm;
-  s.m_kg = e.m_kg;
-  s.d_spread = e.d_se;
-  s.k_spread = e.k_se;
-  s.d_lo = e.d_nspm - e.ci_factor * e.d_se;
-  s.d_hi = e.d_nspm + e.ci_factor * e.d_se;
-  s.k_lo = e.k_npm - e.ci_factor * e.k_se;
-  s.k_hi = e.k_npm + e.ci_factor * e.k_se;
-  s.identifiable = e.identifiable;
-  s.flag = e.flag;
-  s.disturbance = e.disturbance;
-  return s;
-}
-
 }  // namespace
-
-std::vector<std::string> all_methods() { return {"pem", "paper", "paper-pooled", "oe", "oe-trial"}; }
-std::string default_method() { return "pem"; }
 
 SessionEstimator::SessionEstimator(EstimatorSettings s) : s_(std::move(s)) {
   for (const auto& m : s_.methods) {
-    const auto all = all_methods();
-    if (std::find(all.begin(), all.end(), m) == all.end())
-      throw std::invalid_argument("unknown method '" + m + "' (known: pem, paper, paper-pooled, oe, oe-trial, all)");
+    const Method* method = find_method(m);
+    if (!method) throw std::invalid_argument("unknown method '" + m + "' (known: " + method_list() + ", all)");
+    methods_.push_back(method);
+    windows_ = windows_ | method->windows();
   }
 }
 
@@ -122,14 +42,14 @@ void SessionEstimator::add_trial(const SessionInfo& info, TrialData&& t) {
   }
   ++n_trials_;
   // The window rule costs ~1 ms: resolve it once per session (recorded in the report's settings).
-  if (s_.pipeline.sg_window <= 0) s_.pipeline.sg_window = sg_window_for(s_.pipeline, info.fs_hz);
+  if (s_.pipeline.sg_window <= 0) s_.pipeline.sg_window = sg_window_for(s_.pipeline, info.sample_rate_hz);
   // PSD of the principal-axis jerk with one segment spanning the trial
   // (zero-padded to a common nfft so all trials share one frequency grid).
   // The same filter and values as principal_axis_jerk(), with the filter
   // designed once per session and the buffers reused.
   const int win = s_.pipeline.sg_window;
   if (t.size() >= static_cast<std::size_t>(win)) {
-    if (!jerk_filter_) jerk_filter_ = std::make_unique<dsp::SavgolFilter>(win, s_.pipeline.sg_order, 3, 1.0 / info.fs_hz);
+    if (!jerk_filter_) jerk_filter_ = std::make_unique<dsp::SavgolFilter>(win, s_.pipeline.sg_order, 3, 1.0 / info.sample_rate_hz);
     const std::size_t n = t.size();
     jerk_.resize(n);
     for (std::size_t i = 0; i < n; ++i) jerk_[i] = t.x_m[i](1);
@@ -140,7 +60,7 @@ void SessionEstimator::add_trial(const SessionInfo& info, TrialData&& t) {
     wo.nfft = s_.psd_nfft;
     wo.nperseg = static_cast<int>(std::min<std::size_t>(n, static_cast<std::size_t>(s_.psd_nfft)));
     wo.noverlap = wo.nperseg / 2;
-    dsp::welch(j, info.fs_hz, wo, psd_);
+    dsp::welch(j, info.sample_rate_hz, wo, psd_);
     if (f_.empty()) {
       f_ = psd_.f_hz;
       psd_unpert_.assign(f_.size(), 0.0);
@@ -173,9 +93,8 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& t, const P
       throw std::invalid_argument("trial " + std::to_string(t.trial) + ": onset position (" + std::to_string(x_on.x()) +
                                   ", " + std::to_string(x_on.y()) + ") m out of the arm's reach");
     p.vw = isolate_variational(info_, t, pipe, jerk_x2);
-    p.ow = make_oe_window(info_, t, *m_bsp, s_.oe);
-    if (std::find(s_.methods.begin(), s_.methods.end(), "pem") != s_.methods.end())
-      p.pw = make_pem_window(info_, t, *m_bsp, s_.pem);
+    if (needs(windows_, DataWindow::output_error)) p.ow = make_oe_window(info_, t, *m_bsp, s_.oe);
+    if (needs(windows_, DataWindow::prediction_error)) p.pw = make_pem_window(info_, t, *m_bsp, s_.pem);
     p.m_bsp = *m_bsp;
     if (t.has_truth) {
       p.has_truth = true;
@@ -199,7 +118,7 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
   rep.n_trials = n_trials_;
   rep.n_perturbed = n_perturbed_;
   if (!have_info_) return rep;
-  rep.sg_window = sg_window_for(s_.pipeline, info_.fs_hz);
+  rep.sg_window = sg_window_for(s_.pipeline, info_.sample_rate_hz);
 
   // PSDs (Fig. 3) and the automatic cut-off (§4.3).
   auto& psd = rep.psd;
@@ -278,25 +197,22 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
   std::set<double> angles;
   for (const auto& w : vw) angles.insert(to_deg(w.angle_rad));
 
-  for (const auto& method : s_.methods) {
+  const SessionWindows data{&info_, &s_, vw, mb, needs(windows_, DataWindow::output_error) ? std::span<const OeWindow>(ow) : std::span<const OeWindow>{},
+                            needs(windows_, DataWindow::prediction_error) ? std::span<const OeWindow>(pw) : std::span<const OeWindow>{}};
+  for (const Method* method : methods_) {
     if (vw.empty()) break;
-    std::vector<TrialResult> per;
-    if (per_trial_method(method)) {
+    const std::string name = method->name();
+    if (method->per_trial()) {
+      std::vector<TrialResult> per;
       for (std::size_t i = 0; i < vw.size(); ++i) {
         TrialResult r;
         r.trial = vw[i].trial;
         r.angle_deg = to_deg(vw[i].angle_rad);
-        r.method = method;
+        r.method = name;
         try {
-          if (method == "paper") {
-            r.est = fit_equation_error(std::span(&vw[i], 1), std::span(&mb[i], 1), s_.ls);
-          } else {
-            OeSettings o = s_.oe;
-            o.jackknife = false;
-            r.est = fit_output_error(std::span(&ow[i], 1), o);
-          }
+          r.est = method->fit(data, {std::span(&i, 1), nullptr});
         } catch (const std::exception& e) {
-          rep.issues.push_back({vw[i].trial, method + ": " + e.what()});
+          rep.issues.push_back({vw[i].trial, name + ": " + e.what()});
           continue;
         }
         if (!vw[i].dx_true.empty()) {
@@ -311,61 +227,33 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
       }
       std::vector<const TrialResult*> all;
       for (const auto& r : per) all.push_back(&r);
-      rep.summaries.push_back(summarise_trials(method, "session", all));
+      rep.summaries.push_back(summarise_trials(name, SummaryGroup::session(), all));
       for (double a : angles) {
         std::vector<const TrialResult*> sub;
         for (const auto& r : per)
           if (r.angle_deg == a) sub.push_back(&r);
-        rep.summaries.push_back(summarise_trials(method, "angle " + std::to_string(static_cast<int>(std::lround(a))), sub));
+        rep.summaries.push_back(summarise_trials(name, SummaryGroup::angle(a), sub));
       }
       rep.trials.insert(rep.trials.end(), per.begin(), per.end());
     } else {
-      std::optional<DisturbanceModel> session_disturbance;
-      bool session_only = true;
-      auto pooled = [&](const std::vector<std::size_t>& idx, bool jack) {
-        if (method == "paper-pooled") {
-          std::vector<VariationalWindow> w;
-          std::vector<Mat2> m;
-          for (auto i : idx) {
-            w.push_back(vw[i]);
-            m.push_back(mb[i]);
-          }
-          return fit_equation_error(w, m, s_.ls);
-        }
-        std::vector<OeWindow> w;
-        if (method == "pem") {
-          for (auto i : idx) w.push_back(pw[i]);
-          PemSettings ps = s_.pem;
-          if (!session_only && session_disturbance) {  // per angle: D, K only
-            ps.hold_disturbance = true;
-            ps.fixed_disturbance = *session_disturbance;
-          }
-          return fit_prediction_error(w, ps);
-        }
-        for (auto i : idx) w.push_back(ow[i]);
-        OeSettings o = s_.oe;
-        o.jackknife = jack && s_.oe.jackknife;
-        return fit_output_error(w, o);
-      };
+      std::optional<ImpedanceEstimate> session_fit;
       std::vector<std::size_t> idx(vw.size());
       for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
       try {
-        const auto e = pooled(idx, true);
-        session_disturbance = e.disturbance;
-        rep.summaries.push_back(summarise_pooled(method, "session", e));
+        session_fit = method->fit(data, {idx, nullptr});
+        rep.summaries.push_back(summarise_pooled(name, SummaryGroup::session(), *session_fit));
       } catch (const std::exception& e) {
-        rep.warnings.push_back(method + ": session fit failed: " + e.what());
+        rep.warnings.push_back(name + ": session fit failed: " + e.what());
       }
-      session_only = false;
       for (double a : angles) {
         std::vector<std::size_t> sub;
         for (std::size_t i = 0; i < vw.size(); ++i)
           if (to_deg(vw[i].angle_rad) == a) sub.push_back(i);
         try {
           rep.summaries.push_back(
-              summarise_pooled(method, "angle " + std::to_string(static_cast<int>(std::lround(a))), pooled(sub, true)));
+              summarise_pooled(name, SummaryGroup::angle(a), method->fit(data, {sub, session_fit ? &*session_fit : nullptr})));
         } catch (const std::exception& e) {
-          rep.warnings.push_back(method + ": angle " + std::to_string(a) + " fit failed: " + e.what());
+          rep.warnings.push_back(name + ": angle " + std::to_string(a) + " fit failed: " + e.what());
         }
       }
     }
@@ -452,15 +340,17 @@ Report estimate_log(const std::string& path, const EstimatorSettings& s) {
   try {
     logging::read_log(path, asmb);
     asmb.finish();
-  } catch (...) {
+  } catch (const std::exception& e) {
     queue.close();
     worker.join();
-    throw;
+    // Every reason a log cannot be read is "input unusable"; name the file once.
+    const std::string what = e.what();
+    throw manip::InputError(what.rfind(path, 0) == 0 ? what : path + ": " + what);
   }
   queue.close();
   worker.join();
   if (worker_error) std::rethrow_exception(worker_error);
-  if (!asmb.has_session()) throw std::runtime_error(path + ": no session message (MANIP_SESSION) in the log");
+  if (!asmb.has_session()) throw manip::InputError(path + ": no session message (MANIP_SESSION) in the log");
   return est.finish(asmb.issues(), asmb.warnings());
 }
 

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdint>
 
+#include "manip/common/errors.hpp"
+
 namespace manip::estimation {
 namespace {
 Vec2 v2(const double a[2]) { return Vec2(a[0], a[1]); }
@@ -18,33 +20,8 @@ std::int64_t sub_sat(std::int64_t a, std::int64_t b) {
 }  // namespace
 
 SessionInfo session_info_from(const manip::session_t& m) {
-  SessionInfo s;
-  s.fs_hz = m.sample_rate_hz;
-  s.m_adm_kg = Vec2(m.m_adm_kg[0], m.m_adm_kg[1]).asDiagonal();
-  s.d_adm_nspm = Vec2(m.d_adm_nspm[0], m.d_adm_nspm[1]).asDiagonal();
-  s.m_handle_kg = Vec2(m.m_handle_kg[0], m.m_handle_kg[1]).asDiagonal();
-  // Diagonal admittance/handle matrices are given per workspace axis; rotate
-  // them into the shoulder frame (identity for the usual pure translation).
-  s.frame.origin_in_shoulder_m = v2(m.workspace_origin_in_shoulder_m);
-  s.frame.rot_rad = m.workspace_to_shoulder_rot_rad;
-  const Mat2 r = s.frame.rotation();
-  s.m_adm_kg = r * s.m_adm_kg * r.transpose();
-  s.d_adm_nspm = r * s.d_adm_nspm * r.transpose();
-  s.m_handle_kg = r * s.m_handle_kg * r.transpose();
-  for (int i = 0; i < 2; ++i) {
-    s.anthropometrics.length_m[i] = m.segment_length_m[i];
-    s.anthropometrics.mass_kg[i] = m.segment_mass_kg[i];
-    s.anthropometrics.com_m[i] = m.segment_com_m[i];
-    s.anthropometrics.inertia_kgm2[i] = m.segment_inertia_kgm2[i];
-  }
-  s.pert_duration_s = m.pert_duration_s;
-  s.pert_amplitude_n = m.pert_amplitude_n;
-  s.trigger_x2_shoulder_m = m.trigger_x2_shoulder_m;
-  s.source = m.source;
-  s.software_version = m.software_version;
-  s.participant_id = m.participant_id;
-  s.session_id = m.session_id;
-  s.schema_version = m.schema_version;
+  SessionInfo s = schema::from_message(m);
+  if (const auto why = s.invalid_reason()) throw manip::InputError("session message: " + *why);
   return s;
 }
 
@@ -56,7 +33,7 @@ void TrialAssembler::on_session(const manip::session_t& msg) {
   info_ = session_info_from(msg);
   rot_ = info_.frame.rotation();
   has_session_ = true;
-  if (!(info_.fs_hz > 0.0)) throw std::runtime_error("session message: sample_rate_hz must be positive");
+  if (!(info_.sample_rate_hz > 0.0)) throw std::runtime_error("session message: sample_rate_hz must be positive");
   if (const auto why = info_.anthropometrics.invalid_reason())
     warnings_.push_back("session message: anthropometrics invalid (" + *why + "); M_BSP cannot be computed");
 }

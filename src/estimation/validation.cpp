@@ -1,7 +1,8 @@
 #include "manip/estimation/validation.hpp"
 
+#include "manip/estimation/report/svg.hpp"
+
 #include <cmath>
-#include <fstream>
 #include <iomanip>
 #include <sstream>
 #include <stdexcept>
@@ -85,38 +86,18 @@ std::string format_text(const NrmseCurves& c) {
 }
 
 void write_nrmse_plot(const NrmseCurves& c, const std::string& path) {
-  std::ofstream o(path);
-  if (!o) throw std::runtime_error(path + ": cannot write plot");
-  const double W = 640, H = 400, L = 60, R = 160, T = 40, B = 50;
-  double ymax = 0.0;
-  for (std::size_t s = 0; s < 4; ++s)
-    for (const auto& v : c.mean[s]) ymax = std::max(ymax, v.maxCoeff() * 100);
-  ymax = std::max(ymax * 1.1, 1.0);
-  auto px = [&](double t) { return L + t / c.dt_s.back() * (W - L - R); };
-  auto py = [&](double y) { return T + (1 - y / ymax) * (H - T - B); };
-  o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H
-    << "' font-family='sans-serif' font-size='12'><rect width='100%' height='100%' fill='white'/>\n"
-    << "<text x='" << W / 2 << "' y='20' text-anchor='middle' font-size='14'>NRMSE of the estimated variational dynamics (Fig. 4), "
-    << c.isolation << " isolation</text>\n"
-    << "<rect x='" << L << "' y='" << T << "' width='" << W - L - R << "' height='" << H - T - B << "' fill='none' stroke='black'/>\n";
-  for (int i = 0; i <= 4; ++i) {
-    o << "<text x='" << px(c.dt_s.back() * i / 4) << "' y='" << H - B + 15 << "' text-anchor='middle'>"
-      << std::lround(c.dt_s.back() * i / 4 * 1000) << "</text>";
-    o << "<text x='" << L - 5 << "' y='" << py(ymax * i / 4) + 4 << "' text-anchor='end'>" << std::setprecision(3)
-      << ymax * i / 4 << "</text>\n";
-  }
-  o << "<text x='" << (L + W - R) / 2 << "' y='" << H - 12 << "' text-anchor='middle'>Δt [ms]</text>"
-    << "<text x='15' y='" << H / 2 << "' transform='rotate(-90 15 " << H / 2 << ")' text-anchor='middle'>NRMSE [%]</text>\n";
   const char* colors[4] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728"};
-  int li = 0;
+  std::vector<double> t_ms;
+  for (double dt : c.dt_s) t_ms.push_back(dt * 1000.0);
+  std::vector<Series> series;
   for (std::size_t s = 0; s < 4; ++s)
-    for (int a = 0; a < 2; ++a, ++li) {
-      o << "<polyline fill='none' stroke='" << colors[s] << "' stroke-dasharray='" << (a ? "4,3" : "none") << "' points='";
-      for (std::size_t i = 0; i < c.dt_s.size(); ++i) o << px(c.dt_s[i]) << ',' << py(c.mean[s][i](a) * 100) << ' ';
-      o << "'/><text x='" << W - R + 10 << "' y='" << T + 15 + 16 * li << "' fill='" << colors[s] << "'>"
-        << NrmseCurves::kSignals[s] << " x" << a + 1 << "</text>\n";
+    for (int a = 0; a < 2; ++a) {
+      std::vector<double> y;
+      for (const auto& v : c.mean[s]) y.push_back(v(a) * 100.0);
+      series.push_back({std::string(NrmseCurves::kSignals[s]) + " x" + std::to_string(a + 1), t_ms, y, colors[s], a == 1});
     }
-  o << "</svg>\n";
+  svg_plot(path, "NRMSE of the estimated variational dynamics (Fig. 4), " + c.isolation + " isolation", "Δt [ms]",
+           "NRMSE [%]", series, {.y_from_zero = true});
 }
 
 }  // namespace manip::estimation

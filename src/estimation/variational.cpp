@@ -30,7 +30,7 @@ VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& 
 
 VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& trial, const PipelineSettings& s,
                                       std::span<const double> jerk_x2) {
-  const double fs = info.fs_hz;
+  const double fs = info.sample_rate_hz;
   const double dt = 1.0 / fs;
   if (trial.onset_index < 0) throw std::invalid_argument(trial_name(trial) + ": no perturbation onset");
   const auto n_win = static_cast<std::size_t>(std::llround(s.t_est_s * fs)) + 1;
@@ -60,7 +60,9 @@ VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& 
   w.u_pert.assign(trial.u_pert_n.begin() + static_cast<std::ptrdiff_t>(on),
                   trial.u_pert_n.begin() + static_cast<std::ptrdiff_t>(on + n_win));
 
-  const Mat2 m_dev = info.m_adm_kg + info.m_handle_kg;
+  const Mat2 m_handle = info.m_handle_shoulder_kg();
+  const Mat2 d_adm = info.d_adm_shoulder_nspm();
+  const Mat2 m_dev = info.m_adm_shoulder_kg() + m_handle;
   std::vector<double> buf(trial.size()), hp(trial.size()), acc(n_win), vel(n_win), pos(n_win), dfs(n_win);
   for (int a = 0; a < 2; ++a) {
     // Jerk -> high-pass -> integrate from onset (§3.1).
@@ -86,8 +88,8 @@ VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& 
     }
   }
   for (std::size_t k = 0; k < n_win; ++k) {
-    w.du_ext_adm[k] = w.u_pert[k] - m_dev * w.dxdd[k] - info.d_adm_nspm * w.dxd[k];  // eq. 21
-    w.du_ext_force[k] = -(w.du_ext_force[k] + info.m_handle_kg * w.dxdd[k]);
+    w.du_ext_adm[k] = w.u_pert[k] - m_dev * w.dxdd[k] - d_adm * w.dxd[k];  // eq. 21
+    w.du_ext_force[k] = -(w.du_ext_force[k] + m_handle * w.dxdd[k]);
   }
   if (!trial.x_twin_m.empty()) {
     w.dx_true.resize(n_win);
@@ -98,16 +100,16 @@ VariationalWindow isolate_variational(const SessionInfo& info, const TrialData& 
       w.dx_true[k] = trial.x_ref_m[on + k] - trial.x_twin_m[on + k];
       w.dxd_true[k] = trial.xd_ref_m[on + k] - trial.xd_twin_m[on + k];
       w.dxdd_true[k] = trial.xdd_ref_m[on + k] - trial.xdd_twin_m[on + k];
-      w.du_ext_true[k] = w.u_pert[k] - m_dev * w.dxdd_true[k] - info.d_adm_nspm * w.dxd_true[k];  // eq. 21, exact signals
+      w.du_ext_true[k] = w.u_pert[k] - m_dev * w.dxdd_true[k] - d_adm * w.dxd_true[k];  // eq. 21, exact signals
     }
   }
   return w;
 }
 
 std::vector<double> principal_axis_jerk(const SessionInfo& info, const TrialData& trial, const PipelineSettings& s) {
-  const int win = sg_window_for(s, info.fs_hz);
+  const int win = sg_window_for(s, info.sample_rate_hz);
   if (trial.size() < static_cast<std::size_t>(win)) return {};
-  const dsp::SavgolFilter jerk_filter(win, s.sg_order, 3, 1.0 / info.fs_hz);
+  const dsp::SavgolFilter jerk_filter(win, s.sg_order, 3, 1.0 / info.sample_rate_hz);
   const auto x2 = axis(trial.x_m, 1);
   std::vector<double> j(x2.size());
   jerk_filter.apply(x2, j);

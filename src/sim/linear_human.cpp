@@ -18,9 +18,12 @@ void LinearImpedanceHuman::begin_trial(const ReachSpec& reach, std::uint64_t see
   x_ = reach.start_shoulder_m;
   xd_.setZero();
   rng_.seed(seed);
-  gauss_.reset();
   // Start the motor noise in its stationary distribution so trials are alike.
-  noise_ = Vec2(gauss_(rng_), gauss_(rng_)) * p_.motor_noise_n;
+  // Draws in separate statements: argument evaluation order is unspecified and
+  // differs between compilers, which would swap the axes' noise.
+  const double n1 = rng_.normal();
+  const double n2 = rng_.normal();
+  noise_ = Vec2(n1, n2) * p_.motor_noise_n;
   for (auto& d : delay_) d = {0.0, 0.0, 0.0, 0.0};
   delay_head_ = 0;
 }
@@ -59,7 +62,9 @@ void LinearImpedanceHuman::advance(double dt_s, const Vec2& xdd_hand_mps2) {
     // Exact Ornstein-Uhlenbeck update: zero-mean, stationary std motor_noise_n.
     const double a = std::exp(-dt_s / p_.motor_noise_tau_s);
     const double b = p_.motor_noise_n * std::sqrt(1.0 - a * a);
-    noise_ = a * noise_ + b * Vec2(gauss_(rng_), gauss_(rng_));
+    const double n1 = rng_.normal();
+    const double n2 = rng_.normal();
+    noise_ = a * noise_ + b * Vec2(n1, n2);
   }
   t_ += dt_s;
 }

@@ -19,90 +19,7 @@ Mat2 inverse2(const Mat2& m) {
   return r / det;
 }
 
-std::uint64_t splitmix64(std::uint64_t& x) {
-  std::uint64_t z = (x += 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-
-std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
-
-constexpr double kZigR = 3.442619855899;  // start of the tail (128 layers)
-
 }  // namespace
-
-// ---- GaussianSource ---------------------------------------------------------
-
-GaussianSource::GaussianSource() {
-  // Layer tables of Marsaglia & Tsang (2000), 128 layers of area v each; the
-  // value is a signed 32-bit integer scaled by wn.
-  constexpr double m1 = 2147483648.0;  // 2^31
-  const double v = 9.91256303526217e-3;
-  double dn = kZigR, tn = dn;
-  const double q = v / std::exp(-0.5 * dn * dn);
-  kn_[0] = static_cast<std::uint32_t>((dn / q) * m1);
-  kn_[1] = 0;
-  wn_[0] = q / m1;
-  wn_[127] = dn / m1;
-  fn_[0] = 1.0;
-  fn_[127] = std::exp(-0.5 * dn * dn);
-  for (int i = 126; i >= 1; --i) {
-    dn = std::sqrt(-2.0 * std::log(v / dn + std::exp(-0.5 * dn * dn)));
-    kn_[static_cast<std::size_t>(i + 1)] = static_cast<std::uint32_t>((dn / tn) * m1);
-    tn = dn;
-    fn_[static_cast<std::size_t>(i)] = std::exp(-0.5 * dn * dn);
-    wn_[static_cast<std::size_t>(i)] = dn / m1;
-  }
-  seed(0);
-}
-
-void GaussianSource::seed(std::uint64_t s) {
-  for (auto& w : s_) w = splitmix64(s);
-}
-
-std::uint64_t GaussianSource::next_u64() {  // xoshiro256++
-  const std::uint64_t r = rotl(s_[0] + s_[3], 23) + s_[0];
-  const std::uint64_t t = s_[1] << 17;
-  s_[2] ^= s_[0];
-  s_[3] ^= s_[1];
-  s_[1] ^= s_[2];
-  s_[0] ^= s_[3];
-  s_[2] ^= t;
-  s_[3] = rotl(s_[3], 45);
-  return r;
-}
-
-double GaussianSource::uniform_open() { return (static_cast<double>(next_u64() >> 11) + 0.5) * 0x1.0p-53; }
-
-double GaussianSource::operator()() {
-  const std::uint64_t u = next_u64();
-  const auto iz = static_cast<unsigned>(u & 127u);
-  const auto hz = static_cast<std::int64_t>(static_cast<std::int32_t>(static_cast<std::uint32_t>(u >> 32)));
-  const auto mag = static_cast<std::uint64_t>(hz < 0 ? -hz : hz);
-  if (mag < kn_[iz]) return static_cast<double>(hz) * wn_[iz];  // inside the layer: ~99 % of draws
-  return tail(hz, iz);
-}
-
-double GaussianSource::tail(std::int64_t hz, unsigned iz) {
-  for (;;) {
-    const double x = static_cast<double>(hz) * wn_[iz];
-    if (iz == 0) {  // the base strip's tail beyond r (Marsaglia 1964)
-      double xt, y;
-      do {
-        xt = -std::log(uniform_open()) / kZigR;
-        y = -std::log(uniform_open());
-      } while (y + y < xt * xt);
-      return hz > 0 ? kZigR + xt : -kZigR - xt;
-    }
-    if (fn_[iz] + uniform_open() * (fn_[iz - 1] - fn_[iz]) < std::exp(-0.5 * x * x)) return x;
-    const std::uint64_t u = next_u64();
-    iz = static_cast<unsigned>(u & 127u);
-    hz = static_cast<std::int64_t>(static_cast<std::int32_t>(static_cast<std::uint32_t>(u >> 32)));
-    const auto mag = static_cast<std::uint64_t>(hz < 0 ? -hz : hz);
-    if (mag < kn_[iz]) return static_cast<double>(hz) * wn_[iz];
-  }
-}
 
 // ---- NeuromechanicalArm -----------------------------------------------------
 
@@ -206,9 +123,9 @@ void NeuromechanicalArm::begin_trial(const ReachSpec& reach, std::uint64_t seed)
   sub_ = 0;
   lambda_.setZero();
   xdd_last_.setZero();
-  gauss_.seed(seed);
+  rng_.seed(seed);
   // Start the noise in its stationary distribution, so that trials are alike from t = 0.
-  for (int i = 0; i < kMuscles; ++i) noise_(i) = gauss_();
+  for (int i = 0; i < kMuscles; ++i) noise_(i) = rng_.normal();
   set_q(*q0);
   js_.qd_radps.setZero();
   update_plan();
@@ -425,7 +342,7 @@ void NeuromechanicalArm::integrate(double h, const Vec2& xdd_hand_mps2) {
 
 void NeuromechanicalArm::neural_step() {
   ++step_;
-  for (int i = 0; i < kMuscles; ++i) noise_(i) = noise_rho_ * noise_(i) + noise_sigma_ * gauss_();
+  for (int i = 0; i < kMuscles; ++i) noise_(i) = noise_rho_ * noise_(i) + noise_sigma_ * rng_.normal();
   update_plan();
   push_error();
 }

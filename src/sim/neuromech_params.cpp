@@ -3,11 +3,12 @@
 
 #include <algorithm>
 #include <cmath>
-#include <initializer_list>
 #include <numbers>
 #include <sstream>
 #include <stdexcept>
 
+#include "manip/common/errors.hpp"
+#include "manip/common/yaml_reader.hpp"
 #include "manip/sim/neuromech_arm.hpp"
 
 namespace manip::sim {
@@ -36,69 +37,13 @@ std::optional<std::string> check_vec(const MuscleVec& v, const std::string& key,
   return std::nullopt;
 }
 
-std::string where(const YAML::Exception& e) {
-  return e.mark.is_null() ? std::string() : ":" + std::to_string(e.mark.line + 1);
+template <int N>
+Eigen::Matrix<double, N, 1> vec(yaml::Section& s, const std::string& key) {
+  const auto v = s.numbers(key, static_cast<std::size_t>(N));
+  Eigen::Matrix<double, N, 1> out;
+  for (int i = 0; i < N; ++i) out(i) = v[static_cast<std::size_t>(i)];
+  return out;
 }
-
-// Strict reader: every key required, unknown keys rejected, errors name file and key.
-class Reader {
- public:
-  explicit Reader(std::string file) : file_(std::move(file)) {}
-
-  [[noreturn]] void fail(const std::string& key, const std::string& why) const {
-    throw std::runtime_error(file_ + ": " + key + ": " + why);
-  }
-
-  static std::string join(const std::string& path, const char* key) {
-    return path.empty() ? std::string(key) : path + "." + key;
-  }
-
-  // Checks that `node` (at `path`) is a map with exactly the keys `allowed`.
-  void expect_keys(const YAML::Node& node, const std::string& path, std::initializer_list<const char*> allowed) const {
-    if (!node.IsMap()) fail(path.empty() ? "<top level>" : path, "expected a map of keys");
-    for (const auto& kv : node) {
-      const auto k = kv.first.as<std::string>();
-      const bool known = std::any_of(allowed.begin(), allowed.end(), [&](const char* a) { return k == a; });
-      if (!known) {
-        std::string list;
-        for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-        fail(join(path, k.c_str()), "unknown key (expected one of: " + list + ")");
-      }
-    }
-    for (const char* a : allowed)
-      if (!node[a]) fail(join(path, a), "missing");
-  }
-
-  double number(const YAML::Node& node, const std::string& key) const {
-    if (!node.IsScalar()) fail(key, "expected a number");
-    try {
-      return node.as<double>();
-    } catch (const YAML::Exception&) {
-      fail(key, "'" + node.Scalar() + "' is not a number");
-    }
-  }
-
-  bool boolean(const YAML::Node& node, const std::string& key) const {
-    if (!node.IsScalar()) fail(key, "expected true or false");
-    try {
-      return node.as<bool>();
-    } catch (const YAML::Exception&) {
-      fail(key, "'" + node.Scalar() + "' is not true or false");
-    }
-  }
-
-  template <int N>
-  Eigen::Matrix<double, N, 1> vec(const YAML::Node& node, const std::string& key) const {
-    if (!node.IsSequence() || node.size() != static_cast<std::size_t>(N))
-      fail(key, "expected a list of " + std::to_string(N) + " numbers");
-    Eigen::Matrix<double, N, 1> v;
-    for (int i = 0; i < N; ++i) v(i) = number(node[static_cast<std::size_t>(i)], key + "[" + std::to_string(i) + "]");
-    return v;
-  }
-
- private:
-  std::string file_;
-};
 
 }  // namespace
 
@@ -212,74 +157,65 @@ std::optional<std::string> NeuromechParams::invalid_reason() const {
 }
 
 NeuromechParams load_neuromech_params(const std::string& yaml_path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(yaml_path);
-  } catch (const YAML::BadFile&) {
-    throw std::runtime_error(yaml_path + ": cannot open the file");
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error(yaml_path + where(e) + ": YAML syntax error: " + e.msg);
-  }
-  const Reader r(yaml_path);
+  // The strict common reader: every key required, unknown and duplicate keys
+  // refused, "file:line: key: reason" (manip::ConfigError).
+  const YAML::Node root_node = yaml::load_file(yaml_path);
+  yaml::Section root(yaml_path, root_node, "");
   NeuromechParams p;
-  try {
-    r.expect_keys(root, "", {"integration", "anthropometrics", "muscles", "feedforward", "feedback", "noise"});
 
-    r.expect_keys(root["integration"], "integration", {"step_s", "session_step_s"});
-    p.step_s = r.number(root["integration"]["step_s"], "integration.step_s");
-    p.session_step_s = r.number(root["integration"]["session_step_s"], "integration.session_step_s");
+  auto integ = root.sub("integration");
+  p.step_s = integ.any_number("step_s");
+  p.session_step_s = integ.any_number("session_step_s");
+  integ.finish();
 
-    r.expect_keys(root["anthropometrics"], "anthropometrics", {"upper_arm", "forearm"});
-    for (int i = 0; i < 2; ++i) {
-      const std::string path = std::string("anthropometrics.") + kSegments[i];
-      const YAML::Node s = root["anthropometrics"][kSegments[i]];
-      r.expect_keys(s, path, {"length_m", "mass_kg", "com_m", "inertia_kgm2"});
-      p.anthropometrics.length_m[i] = r.number(s["length_m"], path + ".length_m");
-      p.anthropometrics.mass_kg[i] = r.number(s["mass_kg"], path + ".mass_kg");
-      p.anthropometrics.com_m[i] = r.number(s["com_m"], path + ".com_m");
-      p.anthropometrics.inertia_kgm2[i] = r.number(s["inertia_kgm2"], path + ".inertia_kgm2");
-    }
-
-    const YAML::Node mu = root["muscles"];
-    r.expect_keys(mu, "muscles",
-                  {"moment_arms_m", "k0_npm", "k1_per_m", "stiffness_to_damping_per_s", "tonic_activation_n"});
-    r.expect_keys(mu["moment_arms_m"], "muscles.moment_arms_m", {"shoulder", "elbow"});
-    p.moment_arms_m.row(0) = r.vec<kMuscles>(mu["moment_arms_m"]["shoulder"], "muscles.moment_arms_m.shoulder");
-    p.moment_arms_m.row(1) = r.vec<kMuscles>(mu["moment_arms_m"]["elbow"], "muscles.moment_arms_m.elbow");
-    p.k0_npm = r.vec<kMuscles>(mu["k0_npm"], "muscles.k0_npm");
-    p.k1_per_m = r.vec<kMuscles>(mu["k1_per_m"], "muscles.k1_per_m");
-    p.stiffness_to_damping_per_s = r.number(mu["stiffness_to_damping_per_s"], "muscles.stiffness_to_damping_per_s");
-    p.tonic_activation_n = r.vec<kMuscles>(mu["tonic_activation_n"], "muscles.tonic_activation_n");
-
-    const YAML::Node ff = root["feedforward"];
-    r.expect_keys(ff, "feedforward", {"enabled", "load_mass_kg", "load_damping_nspm"});
-    p.feedforward_enabled = r.boolean(ff["enabled"], "feedforward.enabled");
-    p.load_mass_kg = r.vec<2>(ff["load_mass_kg"], "feedforward.load_mass_kg");
-    p.load_damping_nspm = r.vec<2>(ff["load_damping_nspm"], "feedforward.load_damping_nspm");
-
-    const YAML::Node fb = root["feedback"];
-    r.expect_keys(fb, "feedback", {"short_latency", "long_latency", "voluntary"});
-    for (int i = 0; i < kPathways; ++i) {
-      const char* name = pathway_name(static_cast<Pathway>(i));
-      const std::string path = std::string("feedback.") + name;
-      const YAML::Node n = fb[name];
-      r.expect_keys(n, path, {"enabled", "delay_s", "kp_npm", "kd_nspm"});
-      auto& f = p.feedback[static_cast<std::size_t>(i)];
-      f.enabled = r.boolean(n["enabled"], path + ".enabled");
-      f.delay_s = r.number(n["delay_s"], path + ".delay_s");
-      f.kp_npm = r.number(n["kp_npm"], path + ".kp_npm");
-      f.kd_nspm = r.number(n["kd_nspm"], path + ".kd_nspm");
-    }
-
-    const YAML::Node no = root["noise"];
-    r.expect_keys(no, "noise", {"cv", "floor_n", "tau_s"});
-    p.noise_cv = r.number(no["cv"], "noise.cv");
-    p.noise_floor_n = r.number(no["floor_n"], "noise.floor_n");
-    p.noise_tau_s = r.number(no["tau_s"], "noise.tau_s");
-  } catch (const YAML::Exception& e) {  // anything the strict reader did not anticipate
-    throw std::runtime_error(yaml_path + where(e) + ": " + e.msg);
+  auto an = root.sub("anthropometrics");
+  for (int i = 0; i < 2; ++i) {
+    auto seg = an.sub(kSegments[i]);
+    p.anthropometrics.length_m[i] = seg.any_number("length_m");
+    p.anthropometrics.mass_kg[i] = seg.any_number("mass_kg");
+    p.anthropometrics.com_m[i] = seg.any_number("com_m");
+    p.anthropometrics.inertia_kgm2[i] = seg.any_number("inertia_kgm2");
+    seg.finish();
   }
-  if (auto why = p.invalid_reason()) throw std::runtime_error(yaml_path + ": " + *why);
+  an.finish();
+
+  auto mu = root.sub("muscles");
+  auto arms = mu.sub("moment_arms_m");
+  p.moment_arms_m.row(0) = vec<kMuscles>(arms, "shoulder").transpose();
+  p.moment_arms_m.row(1) = vec<kMuscles>(arms, "elbow").transpose();
+  arms.finish();
+  p.k0_npm = vec<kMuscles>(mu, "k0_npm");
+  p.k1_per_m = vec<kMuscles>(mu, "k1_per_m");
+  p.stiffness_to_damping_per_s = mu.any_number("stiffness_to_damping_per_s");
+  p.tonic_activation_n = vec<kMuscles>(mu, "tonic_activation_n");
+  mu.finish();
+
+  auto ff = root.sub("feedforward");
+  p.feedforward_enabled = ff.boolean("enabled");
+  p.load_mass_kg = vec<2>(ff, "load_mass_kg");
+  p.load_damping_nspm = vec<2>(ff, "load_damping_nspm");
+  ff.finish();
+
+  auto fb = root.sub("feedback");
+  for (int i = 0; i < kPathways; ++i) {
+    auto n = fb.sub(pathway_name(static_cast<Pathway>(i)));
+    auto& f = p.feedback[static_cast<std::size_t>(i)];
+    f.enabled = n.boolean("enabled");
+    f.delay_s = n.any_number("delay_s");
+    f.kp_npm = n.any_number("kp_npm");
+    f.kd_nspm = n.any_number("kd_nspm");
+    n.finish();
+  }
+  fb.finish();
+
+  auto no = root.sub("noise");
+  p.noise_cv = no.any_number("cv");
+  p.noise_floor_n = no.any_number("floor_n");
+  p.noise_tau_s = no.any_number("tau_s");
+  no.finish();
+  root.finish();
+
+  if (auto why = p.invalid_reason()) throw ConfigError(yaml_path + ": " + *why);
   return p;
 }
 

@@ -2,61 +2,27 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-#include <numbers>
-#include <random>
 #include <stdexcept>
 
+#include "manip/common/rng.hpp"
+#include "manip/control/trigger.hpp"
+#include "manip/schema/codes.hpp"
 #include "manip/version.hpp"
 
 namespace manip::sim {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
-
-std::uint64_t mix(std::uint64_t a, std::uint64_t b) {  // splitmix64 of a combined key
-  std::uint64_t z = a * 0x9E3779B97F4A7C15ull + b + 0x632BE59BD9B4E019ull;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
+// Independent streams from one session seed: the first PortableRng draw of a
+// combined key, so each consumer (reach design, sensor noise, per-trial human
+// noise) has its own generator and a draw added in one does not shift the others.
+std::uint64_t mix(std::uint64_t a, std::uint64_t b) { return PortableRng(a * 0x9E3779B97F4A7C15ull + b).next(); }
 
 void copy2(double dst[2], const Vec2& v) {
   dst[0] = v.x();
   dst[1] = v.y();
 }
 
-manip::session_t make_session_message(const SessionDesign& d) {
-  manip::session_t s{};
-  s.schema_version = manip::session_t::SCHEMA_VERSION;
-  s.software_version = manip::kVersion;
-  s.source = d.source;
-  s.utime_start = 0;
-  s.participant_id = d.participant_id;
-  s.session_id = d.session_id;
-  s.sample_rate_hz = d.sample_rate_hz;
-  s.drive_rate_hz = d.sample_rate_hz;
-  for (int i = 0; i < 2; ++i) {
-    s.m_adm_kg[i] = d.admittance.m_adm_kg(i, i);
-    s.d_adm_nspm[i] = d.admittance.d_adm_nspm(i, i);
-    s.m_handle_kg[i] = d.admittance.m_handle_kg(i, i);
-    s.segment_length_m[i] = d.anthropometrics.length_m[i];
-    s.segment_mass_kg[i] = d.anthropometrics.mass_kg[i];
-    s.segment_com_m[i] = d.anthropometrics.com_m[i];
-    s.segment_inertia_kgm2[i] = d.anthropometrics.inertia_kgm2[i];
-  }
-  copy2(s.workspace_origin_in_shoulder_m, d.frame.origin_in_shoulder_m);
-  s.workspace_to_shoulder_rot_rad = d.frame.rot_rad;
-  s.body_mass_kg = 0.0;
-  s.body_height_m = 0.0;
-  s.pert_duration_s = d.perturbation.duration_s;
-  s.pert_amplitude_n = d.perturbation.amplitude_n;
-  s.trigger_x2_shoulder_m = d.trigger_x2_shoulder_m;
-  s.config_yaml = d.config_yaml;
-  return s;
-}
-
-// Records one simulated trial segment cycle by cycle.
+// One simulated trial segment, cycle by cycle.
 struct TrialRecord {
   std::vector<manip::state_t> states;
   std::int64_t onset_cycle{-1};
@@ -72,141 +38,171 @@ class Quantizer {
   double res_;
 };
 
-}  // namespace
+// Truth accumulated over [onset, onset + T_est] of the unperturbed twin.
+struct TruthAccumulator {
+  std::int64_t onset{-1};
+  Mat2 m{Mat2::Zero()}, d{Mat2::Zero()}, k{Mat2::Zero()};
+  int n{0};
+};
 
-std::vector<double> perturbation_schedule(const SessionDesign& d) {
+void check_design(const SessionDesign& d) {
+  if (auto why = d.session.invalid_reason()) throw std::invalid_argument("session design: " + *why);
+  if (d.substeps < 1) throw std::invalid_argument("session design: substeps must be >= 1");
+  if (d.n_movements < 0) throw std::invalid_argument("session design: negative number of movements");
   const int n_pert = static_cast<int>(d.angles_deg.size()) * d.reps_per_angle;
   if (n_pert > d.n_movements)
     throw std::invalid_argument("session design: " + std::to_string(n_pert) + " perturbed trials do not fit in " +
                                 std::to_string(d.n_movements) + " movements");
-  std::vector<double> sched(static_cast<std::size_t>(d.n_movements), std::numeric_limits<double>::quiet_NaN());
-  std::vector<double> angles;
-  for (int r = 0; r < d.reps_per_angle; ++r)
-    for (double a : d.angles_deg) angles.push_back(a);
-  std::mt19937_64 rng(mix(d.seed, 0xA11CE));
-  std::shuffle(angles.begin(), angles.end(), rng);
-  std::vector<int> idx(static_cast<std::size_t>(d.n_movements));
-  for (int i = 0; i < d.n_movements; ++i) idx[static_cast<std::size_t>(i)] = i;
-  std::shuffle(idx.begin(), idx.end(), rng);
-  std::vector<int> chosen(idx.begin(), idx.begin() + n_pert);
-  std::sort(chosen.begin(), chosen.end());
-  for (int k = 0; k < n_pert; ++k) sched[static_cast<std::size_t>(chosen[static_cast<std::size_t>(k)])] = angles[static_cast<std::size_t>(k)];
-  return sched;
+}
+
+}  // namespace
+
+schema::SessionDescription default_sim_session() {
+  schema::SessionDescription s;
+  s.software_version = manip::kVersion;
+  s.source = "manip_sim";
+  s.participant_id = "sim";
+  s.session_id = "sim-0";
+  s.drive_rate_hz = s.sample_rate_hz;
+  return s;
+}
+
+std::vector<control::TrialSpec> perturbation_schedule(const SessionDesign& d) {
+  check_design(d);
+  const int n_pert = static_cast<int>(d.angles_deg.size()) * d.reps_per_angle;
+  return control::make_schedule(d.n_movements, d.angles_deg, d.reps_per_angle, n_pert, d.seed);
 }
 
 SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging::SessionHandler& out) {
-  if (!(d.sample_rate_hz > 0.0) || d.substeps < 1) throw std::invalid_argument("session design: bad sample rate");
-  const double fs = d.sample_rate_hz;
+  const auto sched = perturbation_schedule(d);
+  const double fs = d.session.sample_rate_hz;
   const double dt = 1.0 / fs;
   const double h = dt / d.substeps;
-  const auto sched = perturbation_schedule(d);
+  const PlantParams plant = plant_params(d.session);
+  const PerturbationProfile profile = d.perturbation();
+  const auto& frame = d.session.frame;
   auto* truth_src = dynamic_cast<TruthSource*>(&human);
 
   SessionRunSummary summary;
-  out.on_session(make_session_message(d));
+  out.on_session(schema::to_message(d.session));
 
   std::int64_t cycle = 0;
-  std::mt19937_64 noise_rng(mix(d.seed, 0xF0C5));
-  std::normal_distribution<double> gauss(0.0, 1.0);
   const Quantizer quant(d.encoder_resolution_m);
   const auto utime_of = [&](std::int64_t c) { return static_cast<std::int64_t>(std::llround(c * 1e6 / fs)); };
+  control::PerturbationTrigger trigger(d.session.perturbation.trigger_x2_shoulder_m, fs);
 
-  // Simulates one trial segment starting at `cycle0`; perturbation applied
-  // only if `perturb`. Returns the states; does not emit them.
+  // Simulates one trial segment starting at `cycle0` (trial -1: the return
+  // between trials). A perturbed run arms the controller's trigger; the twin
+  // (truth != nullptr) is never perturbed and accumulates the truth from the
+  // perturbed run's onset. Returns the states; does not emit them.
   const auto simulate = [&](int trial, const ReachSpec& reach, std::uint64_t seed, bool perturb, double angle_rad,
-                            std::int64_t cycle0, std::int64_t n_cycles, std::mt19937_64& sensor_rng,
-                            Mat2* d_acc, Mat2* k_acc, Mat2* m_acc, int* n_acc, std::int64_t truth_onset) {
+                            std::int64_t cycle0, std::int64_t n_cycles, PortableRng& sensor_rng,
+                            TruthAccumulator* truth) {
     TrialRecord rec;
     rec.states.reserve(static_cast<std::size_t>(n_cycles));
     rec.x_true.reserve(static_cast<std::size_t>(n_cycles));
     human.begin_trial(reach, seed);
-    Vec2 u_pert = Vec2::Zero();
+    if (perturb)
+      trigger.arm(angle_rad, profile, (reach.goal_shoulder_m - reach.start_shoulder_m).y() >= 0 ? 1.0 : -1.0);
+    else
+      trigger.clear();
+    trigger.forget_previous();
     Vec2 xdd = Vec2::Zero();
     Vec2 f_sensor = Vec2::Zero();
-    Vec2 prev_meas_ws = d.frame.point_to_workspace(human.hand_position_m());
+    Vec2 prev_meas_ws = frame.point_to_workspace(human.hand_position_m());
     prev_meas_ws = Vec2(quant(prev_meas_ws.x()), quant(prev_meas_ws.y()));
-    double prev_x2 = human.hand_position_m().y();
-    const double dir = (reach.goal_shoulder_m - reach.start_shoulder_m).y() >= 0 ? 1.0 : -1.0;
     for (std::int64_t k = 0; k < n_cycles; ++k) {
       const std::int64_t c = cycle0 + k;
-      // Sense.
+      // Sense: encoder position, its backward difference as the velocity (what
+      // the controller sees), both also in the shoulder frame.
       const Vec2 x_sh = human.hand_position_m();
       const Vec2 xd_sh = human.hand_velocity_mps();
-      Vec2 meas_ws = d.frame.point_to_workspace(x_sh);
+      Vec2 meas_ws = frame.point_to_workspace(x_sh);
       meas_ws = Vec2(quant(meas_ws.x()), quant(meas_ws.y()));
-      const Vec2 meas_sh = d.frame.point_to_shoulder(meas_ws);
-      // Trigger on the measured position, first crossing towards the goal (§4.2).
-      if (perturb && rec.onset_cycle < 0 && trial >= 0) {
-        const double x2 = meas_sh.y();
-        if (dir * (prev_x2 - d.trigger_x2_shoulder_m) < 0.0 && dir * (x2 - d.trigger_x2_shoulder_m) >= 0.0)
-          rec.onset_cycle = c;
-        prev_x2 = x2;
-      }
-      u_pert = (perturb && rec.onset_cycle >= 0)
-                   ? d.perturbation.force_n(static_cast<double>(c - rec.onset_cycle) * dt, angle_rad)
-                   : Vec2::Zero();
-      if (truth_onset >= 0 && c >= truth_onset && static_cast<double>(c - truth_onset) * dt <= d.t_est_s && d_acc) {
+      const Vec2 meas_xd_ws = (meas_ws - prev_meas_ws) * fs;
+      const Vec2 meas_sh = frame.point_to_shoulder(meas_ws);
+      const Vec2 meas_xd_sh = frame.vector_to_shoulder(meas_xd_ws);
+      // The controller's trigger on the measured position and velocity (§4.2).
+      if (trial >= 0 && trigger.update(c, meas_sh.y(), meas_xd_sh.y())) rec.onset_cycle = c;
+      const bool pert_active = trial >= 0 && trigger.active(c);
+      const Vec2 u_pert = trigger.force_shoulder_n(c);
+      if (truth && truth->onset >= 0 && c >= truth->onset && static_cast<double>(c - truth->onset) * dt <= d.t_est_s) {
         Mat2 m_x;
         Vec2 hh;
         human.endpoint_dynamics(m_x, hh);
-        *m_acc += m_x;
+        truth->m += m_x;
         if (truth_src) {
           Mat2 dd, kk;
           truth_src->endpoint_impedance(dd, kk);
-          *d_acc += dd;
-          *k_acc += kk;
+          truth->d += dd;
+          truth->k += kk;
         }
-        ++*n_acc;
+        ++truth->n;
       }
       // Record the state of this cycle (sensors at the start of the cycle,
-      // command applied over the cycle, as in the controller).
+      // command applied over the cycle, as in the controller), with the
+      // documented codes (docs/schema-controller.md): RETURN between trials;
+      // in a trial PERTURBATION for T_pert from onset, GOAL_HOLD while resting
+      // in the goal (control::Protocol::in_goal), else REACH.
       manip::state_t s{};
       s.cycle = c;
       s.utime = utime_of(c);
       s.trial = trial;
-      s.phase = static_cast<int8_t>(trial >= 0 ? 1 : 0);
+      // The END cycle (the trial's last) carries the index and RETURN, as the
+      // controller logs it.
+      schema::Phase phase = schema::Phase::kReturn;
+      if (trial >= 0 && k + 1 < n_cycles) {
+        const bool in_goal = (meas_sh - reach.goal_shoulder_m).norm() <= d.target_radius_m &&
+                             meas_xd_sh.norm() <= d.rest_speed_mps;
+        phase = pert_active ? schema::Phase::kPerturbation : in_goal ? schema::Phase::kGoalHold : schema::Phase::kReach;
+      }
+      s.phase = static_cast<std::int8_t>(phase);
+      s.mode = static_cast<std::int8_t>(schema::Mode::kRunning);
       copy2(s.x_workspace_m, meas_ws);
-      copy2(s.xd_workspace_mps, (meas_ws - prev_meas_ws) * fs);
+      copy2(s.xd_workspace_mps, meas_xd_ws);
       prev_meas_ws = meas_ws;
-      copy2(s.x_ref_workspace_m, d.frame.point_to_workspace(x_sh));
-      copy2(s.xd_ref_workspace_mps, d.frame.vector_to_workspace(xd_sh));
+      copy2(s.x_ref_workspace_m, frame.point_to_workspace(x_sh));
+      copy2(s.xd_ref_workspace_mps, frame.vector_to_workspace(xd_sh));
       // Step the plant over the cycle with the held perturbation force.
       for (int j = 0; j < d.substeps; ++j) {
-        const auto ps = step_ideal_admittance(human, d.admittance, u_pert, h, d.midpoint_plant);
+        const auto ps = step_ideal_admittance(human, plant, u_pert, h, d.midpoint_plant);
         if (j == 0) {
           xdd = ps.xdd_mps2;
           f_sensor = ps.f_sensor_n;
         }
       }
-      copy2(s.xdd_ref_workspace_mps2, d.frame.vector_to_workspace(xdd));
+      copy2(s.xdd_ref_workspace_mps2, frame.vector_to_workspace(xdd));
       Vec2 fs_noisy = f_sensor;
-      if (d.force_noise_n > 0.0) fs_noisy += d.force_noise_n * Vec2(gauss(sensor_rng), gauss(sensor_rng));
-      copy2(s.f_sensor_workspace_n, d.frame.vector_to_workspace(fs_noisy));
-      copy2(s.u_pert_workspace_n, d.frame.vector_to_workspace(u_pert));
+      if (d.force_noise_n > 0.0) {
+        const double n1 = sensor_rng.normal();
+        const double n2 = sensor_rng.normal();
+        fs_noisy += d.force_noise_n * Vec2(n1, n2);
+      }
+      copy2(s.f_sensor_workspace_n, frame.vector_to_workspace(fs_noisy));
+      copy2(s.u_pert_workspace_n, frame.vector_to_workspace(u_pert));
       s.f_motor_n[0] = s.f_motor_n[1] = 0.0;
-      s.mode = 2;
       s.fault_flags = 0;
       rec.states.push_back(s);
       rec.x_true.push_back(x_sh);
     }
+    trigger.clear();
     return rec;
   };
 
-  std::uniform_real_distribution<double> jitter(-1.0, 1.0);
-  std::mt19937_64 design_rng(mix(d.seed, 0xDE51));
+  PortableRng design_rng(mix(d.seed, 0xDE51));
   for (int trial = 0; trial < d.n_movements; ++trial) {
-    const double angle_deg = sched[static_cast<std::size_t>(trial)];
-    const bool perturbed = !std::isnan(angle_deg);
-    const double angle = perturbed ? angle_deg * kDeg : 0.0;
+    const auto& spec = sched[static_cast<std::size_t>(trial)];
+    const bool perturbed = spec.perturbed;
+    const double angle = perturbed ? spec.angle_rad : 0.0;
     ReachSpec reach;
     reach.start_shoulder_m = d.start_shoulder_m;
     reach.goal_shoulder_m = d.goal_shoulder_m;
     reach.t_start_s = d.rest_before_s;
-    reach.duration_s = d.reach_duration_s + d.reach_duration_jitter_s * jitter(design_rng);
-    reach.lateral_bow_m = d.lateral_bow_std_m * gauss(design_rng);
+    reach.duration_s = d.reach_duration_s + d.reach_duration_jitter_s * design_rng.uniform(-1.0, 1.0);
+    reach.lateral_bow_m = d.lateral_bow_std_m * design_rng.normal();
     const std::uint64_t seed = mix(d.seed, static_cast<std::uint64_t>(trial) + 1);
     const auto n_cycles = static_cast<std::int64_t>(std::ceil((reach.t_start_s + reach.duration_s + d.rest_after_s) * fs));
-    std::mt19937_64 sensor_rng(mix(seed, 0x5E45));
+    PortableRng sensor_rng(mix(seed, 0x5E45));
 
     manip::trial_event_t ev{};
     ev.trial = trial;
@@ -214,8 +210,8 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
     copy2(ev.start_shoulder_m, reach.start_shoulder_m);
     copy2(ev.goal_shoulder_m, reach.goal_shoulder_m);
     ev.pert_angle_rad = angle;
-    ev.pert_amplitude_n = perturbed ? d.perturbation.amplitude_n : 0.0;
-    ev.pert_duration_s = perturbed ? d.perturbation.duration_s : 0.0;
+    ev.pert_amplitude_n = perturbed ? profile.amplitude_n : 0.0;
+    ev.pert_duration_s = perturbed ? profile.duration_s : 0.0;
     ev.kind = manip::trial_event_t::START;
     ev.cycle = cycle;
     ev.utime = utime_of(cycle);
@@ -223,15 +219,13 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
 
     // Perturbed run first: its onset is where the unperturbed twin (same seed,
     // same sensor noise, identical until onset) accumulates the truth.
-    auto rec = simulate(trial, reach, seed, perturbed, angle, cycle, n_cycles, sensor_rng, nullptr, nullptr, nullptr,
-                        nullptr, -1);
+    auto rec = simulate(trial, reach, seed, perturbed, angle, cycle, n_cycles, sensor_rng, nullptr);
     TrialRecord twin;
-    Mat2 d_acc = Mat2::Zero(), k_acc = Mat2::Zero(), m_acc = Mat2::Zero();
-    int n_acc = 0;
+    TruthAccumulator acc;
     if (perturbed) {
-      std::mt19937_64 twin_sensor_rng(mix(seed, 0x5E45));
-      twin = simulate(trial, reach, seed, false, angle, cycle, n_cycles, twin_sensor_rng, &d_acc, &k_acc, &m_acc, &n_acc,
-                      rec.onset_cycle);
+      PortableRng twin_sensor_rng(mix(seed, 0x5E45));
+      acc.onset = rec.onset_cycle;
+      twin = simulate(trial, reach, seed, false, angle, cycle, n_cycles, twin_sensor_rng, &acc);
     }
     for (std::size_t k = 0; k < rec.states.size(); ++k) {
       if (perturbed && static_cast<std::int64_t>(k) + cycle == rec.onset_cycle) {
@@ -256,11 +250,11 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       }
       summary.max_dev_x1_m.push_back(m1);
       summary.max_dev_x2_m.push_back(m2);
-      if (n_acc > 0) {
+      if (acc.n > 0) {
         manip::impedance_truth_t t{};
         t.trial = trial;
         t.t_est_s = d.t_est_s;
-        const Mat2 mm = m_acc / n_acc, dd = d_acc / n_acc, kk = k_acc / n_acc;
+        const Mat2 mm = acc.m / acc.n, dd = acc.d / acc.n, kk = acc.k / acc.n;
         for (int i = 0; i < 2; ++i)
           for (int j = 0; j < 2; ++j) {
             t.m_kg[2 * i + j] = mm(i, j);
@@ -287,8 +281,7 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       back.t_start_s = 0.0;
       back.duration_s = d.return_s * 0.8;
       const auto n_ret = static_cast<std::int64_t>(std::ceil(d.return_s * fs));
-      auto ret = simulate(-1, back, mix(seed, 0xBAC0), false, 0.0, cycle, n_ret, sensor_rng, nullptr, nullptr, nullptr,
-                          nullptr, -1);
+      auto ret = simulate(-1, back, mix(seed, 0xBAC0), false, 0.0, cycle, n_ret, sensor_rng, nullptr);
       for (const auto& s : ret.states) out.on_state(s);
       cycle += n_ret;
     }

@@ -81,8 +81,8 @@ TEST_CASE("isolation: a synthetic session's variational response and impedance a
   // during a smooth reach, 1 um quantisation. The model-based isolation must recover
   // Δx, Δẋ, Δẍ and Δu_ext far better than the paper's high-pass isolation.
   SessionInfo info;
-  info.m_handle_kg = Mat2::Identity() * 0.3;
-  const double fs = info.fs_hz;
+  info.m_handle_kg = Vec2(0.3, 0.3);
+  const double fs = info.sample_rate_hz;
   Mat2 d_true, k_true;
   d_true << 12.0, -5.0, -4.0, 14.0;
   k_true << 150.0, -60.0, -60.0, 170.0;
@@ -110,9 +110,9 @@ TEST_CASE("isolation: a synthetic session's variational response and impedance a
         if (i >= on) u[i] = prof.force_n(static_cast<double>(i - on) / fs, t.angle_rad);
       }
       const Mat2 m_bsp = *arm.endpoint_inertia_at(x0[on]);
-      const Mat2 m_tot = m_bsp + info.m_adm_kg + info.m_handle_kg;
+      const Mat2 m_tot = m_bsp + info.m_adm_shoulder_kg() + info.m_handle_shoulder_kg();
       std::vector<Vec2> u_win(u.begin() + static_cast<std::ptrdiff_t>(on), u.end());
-      const auto dx = rk4_response(m_tot, d_true + info.d_adm_nspm, k_true, u_win, fs);
+      const auto dx = rk4_response(m_tot, d_true + info.d_adm_shoulder_nspm(), k_true, u_win, fs);
       for (std::size_t i = 0; i < n; ++i) {
         const Vec2 dxi = i >= on ? dx[i - on] : Vec2::Zero();
         const Vec2 xi = x0[i] + dxi;

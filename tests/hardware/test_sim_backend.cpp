@@ -151,10 +151,7 @@ TEST_CASE("rendering error: controller + sim stages vs the ideal admittance, sam
   auto ideal = [&](bool perturb, std::vector<Vec2>& x) {
     auto h = hw::make_sim_human(cfg, cfg.sim);  // sample rate = fs * substeps
     h->begin_trial(reach, 99);
-    manip::sim::AdmittanceParams ap;
-    ap.m_adm_kg = cfg.session.m_adm_kg.asDiagonal();
-    ap.d_adm_nspm = cfg.session.d_adm_nspm.asDiagonal();
-    ap.m_handle_kg = cfg.session.m_handle_kg.asDiagonal();
+    const manip::sim::PlantParams ap = manip::sim::plant_params(cfg.session);
     std::int64_t onset = -1;
     double prev = h->hand_position_m().y();
     for (int k = 0; k < n; ++k) {

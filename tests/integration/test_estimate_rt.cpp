@@ -33,7 +33,7 @@ std::string tmp(const char* n) {
 
 const manip::estimation::Summary* session_summary(const manip::estimation::Report& r, const std::string& method) {
   for (const auto& s : r.summaries)
-    if (s.method == method && s.group == "session") return &s;
+    if (s.method == method && s.group.is_session()) return &s;
   return nullptr;
 }
 
@@ -64,7 +64,7 @@ est::Report estimate_rendered(const RtConfig& cfg, const std::string& path) {
 // The same person (parameters, reach design, schedule seed) on the ideal admittance.
 est::Report estimate_ideal(const RtConfig& cfg, const std::string& path) {
   manip::sim::SessionDesign d;
-  d.sample_rate_hz = cfg.session.sample_rate_hz;
+  d.session = cfg.session;  // the one session description: rates, admittance, handle, frame, pulse
   d.substeps = cfg.sim.substeps;
   d.n_movements = cfg.protocol.movements;
   d.angles_deg = cfg.perturbation.angles_deg;
@@ -72,19 +72,13 @@ est::Report estimate_ideal(const RtConfig& cfg, const std::string& path) {
   d.write_twins = false;
   d.start_shoulder_m = cfg.protocol.start_shoulder_m;
   d.goal_shoulder_m = cfg.protocol.goal_shoulder_m;
-  d.trigger_x2_shoulder_m = cfg.session.perturbation.trigger_x2_shoulder_m;
-  d.perturbation = {cfg.session.perturbation.duration_s, cfg.session.perturbation.amplitude_n};
   d.reach_duration_s = cfg.sim.participant.reach_duration_s;
   d.reach_duration_jitter_s = cfg.sim.participant.reach_duration_jitter_s;
   d.lateral_bow_std_m = cfg.sim.participant.lateral_bow_std_m;
   d.encoder_resolution_m = cfg.sim.encoder_resolution_m;
   d.force_noise_n = cfg.sim.force_noise_n;
-  d.admittance.m_adm_kg = cfg.session.m_adm_kg.asDiagonal();
-  d.admittance.d_adm_nspm = cfg.session.d_adm_nspm.asDiagonal();
-  d.admittance.m_handle_kg = cfg.session.m_handle_kg.asDiagonal();
-  d.frame = cfg.session.frame;
   d.seed = cfg.protocol.seed;
-  d.source = "manip_sim/linear (test: manip_rt comparison)";
+  d.session.source = "manip_sim/linear (test: manip_rt comparison)";
   auto human = hw::make_sim_human(cfg, cfg.sim);
   {
     manip::logging::LogWritingHandler w(path);

@@ -160,7 +160,7 @@ TEST_CASE("estimation input checks: no session, gaps, NaN, missing onset, short 
   CHECK_THAT(issue_for(perturbed[2]), Catch::Contains("without a perturbation onset"));
   CHECK(r.n_used == 5);  // every good perturbed trial is still estimated
   bool has_session_summary = false;
-  for (const auto& sm : r.summaries) has_session_summary = has_session_summary || sm.group == "session";
+  for (const auto& sm : r.summaries) has_session_summary = has_session_summary || sm.group.is_session();
   CHECK(has_session_summary);
 
   SECTION("a window longer than the trials names the trial") {

@@ -25,7 +25,7 @@ TEST_CASE("python interop: a log written by Python's lcm package is read and est
   const Mat2 k_true = (Mat2() << 110.52, -106.05, -106.05, 313.75).finished();
   const Mat2 d_true = (Mat2() << 10.98, -7.94, -8.54, 6.75).finished();
   for (const auto& sm : r.summaries)
-    if (sm.method == "oe" && sm.group == "session") {
+    if (sm.method == "oe" && sm.group.is_session()) {
       INFO("D = " << sm.d_nspm << "\nK = " << sm.k_npm);
       CHECK((sm.k_npm - k_true).norm() < 0.1 * k_true.norm());
       CHECK((sm.d_nspm - d_true).norm() < 0.15 * d_true.norm());

@@ -15,63 +15,14 @@
 #include <string>
 #include <vector>
 
+#include "alloc_counter.hpp"
 #include "fixtures.hpp"
+#include "manip/common/rng.hpp"
 #include "manip/common/perturbation.hpp"
 #include "manip/sim/min_jerk.hpp"
+#include "manip/sim/ideal_admittance.hpp"
 #include "manip/sim/neuromech_arm.hpp"
-
-// ---- allocation counter ------------------------------------------------------
-// Replaces the global allocation functions of this test executable only; they
-// count and forward to malloc, so the RT claim "never allocates" can be checked.
-namespace {
-std::atomic<long> g_allocations{0};
-void* counted_alloc(std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* counted_aligned_alloc(std::size_t n, std::align_val_t al) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  const auto a = static_cast<std::size_t>(al);
-  return std::aligned_alloc(a, ((n == 0 ? 1 : n) + a - 1) / a * a);
-}
-}  // namespace
-
-void* operator new(std::size_t n) {
-  if (void* p = counted_alloc(n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  if (void* p = counted_alloc(n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return counted_alloc(n); }
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return counted_alloc(n); }
-void* operator new(std::size_t n, std::align_val_t al) {
-  if (void* p = counted_aligned_alloc(n, al)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n, std::align_val_t al) {
-  if (void* p = counted_aligned_alloc(n, al)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept {
-  return counted_aligned_alloc(n, al);
-}
-void* operator new[](std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept {
-  return counted_aligned_alloc(n, al);
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
+#include "manip/sim/session_runner.hpp"
 
 using namespace manip;
 using namespace manip::sim;
@@ -81,27 +32,12 @@ namespace {
 constexpr double kDeg = std::numbers::pi / 180.0;
 const std::string kConfig = std::string(MANIP_SOURCE_DIR) + "/config/arm_model.yaml";
 
-// The ideal admittance of eq. 19-20 with the hand on the handle:
-// (M_x + M_adm + M_handle) xdd = h - D_adm xd + u_pert.
-struct TestPlant {
-  Mat2 m_adm_kg{Mat2::Identity() * 5.0};
-  Mat2 d_adm_nspm{Mat2::Identity() * 15.0};
-  Mat2 m_handle_kg{Mat2::Identity() * 0.3};
-};
-
-// midpoint: damping and stiffness of arm and admittance at the middle of the step
-// (the session runner's plant for the neuromechanical arm); else explicit.
-Vec2 plant_step(HumanModel& human, const TestPlant& p, const Vec2& u_pert_n, double dt_s, bool midpoint = true) {
-  Mat2 m_x;
-  Vec2 h;
-  if (midpoint)
-    human.endpoint_dynamics_for_step(dt_s, m_x, h);
-  else
-    human.endpoint_dynamics(m_x, h);
-  const Mat2 m = m_x + p.m_adm_kg + p.m_handle_kg + (midpoint ? 0.5 * dt_s : 0.0) * p.d_adm_nspm;
-  const Vec2 xdd = m.inverse() * (h - p.d_adm_nspm * human.hand_velocity_mps() + u_pert_n);
-  human.advance(dt_s, xdd);
-  return xdd;
+// The ideal admittance of eq. 19-20 as the session describes it (schema
+// defaults: 5 kg, 15 Ns/m, 0.25 kg handle), stepped by the library's plant step;
+// midpoint by default (the session runner's plant for the neuromechanical arm).
+PlantParams test_plant() { return plant_params(default_sim_session()); }
+Vec2 plant_step(HumanModel& human, const PlantParams& p, const Vec2& u_pert_n, double dt_s, bool midpoint = true) {
+  return step_ideal_admittance(human, p, u_pert_n, dt_s, midpoint).xdd_mps2;
 }
 
 struct Trial {
@@ -115,7 +51,7 @@ struct Trial {
 // forced_onset >= 0: start the perturbation at that sample instead.
 Trial run_trial(NeuromechanicalArm& arm, const ReachSpec& reach, std::uint64_t seed, double amplitude_n,
                 double angle_rad, double fs_hz = 4000.0, double extra_s = 0.5, long forced_onset = -1) {
-  const TestPlant plant;
+  const PlantParams plant = test_plant();
   PerturbationProfile prof;
   prof.amplitude_n = amplitude_n;
   arm.begin_trial(reach, seed);
@@ -235,13 +171,17 @@ TEST_CASE("neuromech: invalid config values and keys are rejected with file, key
              Contains("feedback.long_latency.delay_s") && Contains("at least one simulation step"));
   CHECK_THAT(load_error("  tau_s: 0.05", "  tau_s: 0.05\n  sigma: 1.0"), Contains("noise.sigma") && Contains("unknown key"));
   CHECK_THAT(load_error("  floor_n: 0.0\n", ""), Contains("noise.floor_n") && Contains("missing"));
-  CHECK_THAT(load_error("step_s: 6.25e-05", "step_s: fast"), Contains("integration.step_s") && Contains("not a number"));
+  // The common strict reader: a key given twice is refused with its line (file:line: key: reason).
+  CHECK_THAT(load_error("  tau_s: 0.05", "  tau_s: 0.05\n  tau_s: 0.06"),
+             Contains("arm.yaml:112: noise.tau_s: duplicate key"));
+  CHECK_THAT(load_error("  tau_s: 0.05", "  tau_s: -0.05"), Contains("noise.tau_s") && Contains("must be positive"));
+  CHECK_THAT(load_error("step_s: 6.25e-05", "step_s: fast"), Contains("integration.step_s") && Contains("expected a finite number"));
   CHECK_THAT(load_error("session_step_s: 2.5e-04", "session_step_s: 0.0"),
              Contains("integration.session_step_s") && Contains("must be in"));
   CHECK_THAT(load_error("session_step_s: 2.5e-04", "session_step_s: 3.0e-04"),  // 25 ms is not 83.3 steps
              Contains("feedback.short_latency.delay_s") && Contains("session steps"));
   CHECK_THAT(load_error("k1_per_m: [75.0, 75.0, 75.0, 75.0, 75.0, 75.0]", "k1_per_m: [75.0, 75.0]"),
-             Contains("muscles.k1_per_m") && Contains("list of 6"));
+             Contains("muscles.k1_per_m") && Contains("expected 6 numbers"));
   CHECK_THAT(load_error("k0_npm:   [810.8,", "k0_npm:   [-810.8,"), Contains("muscles.k0_npm") && Contains("shoulder_flexor"));
   CHECK_THAT(load_error("shoulder: [0.0536, -0.0536, 0.0,    0.0,    0.0386, -0.0388]",
                         "shoulder: [0.0536, 0.0536, 0.0,    0.0,    0.0386, 0.0388]\n    elbow:    [0.0,    0.0,     0.0316, 0.0267, 0.0427, 0.0300]\n    unused:"),
@@ -261,15 +201,14 @@ TEST_CASE("neuromech: invalid config values and keys are rejected with file, key
   CHECK_THROWS_AS(NeuromechanicalArm(p), std::invalid_argument);
 }
 
-TEST_CASE("neuromech: the motor-noise Gaussian source is standard normal and deterministic per seed") {
-  GaussianSource g;
-  g.seed(12345);
+TEST_CASE("neuromech: the motor-noise source (PortableRng::normal) is standard normal and deterministic per seed") {
+  PortableRng g(12345);
   const int n = 2'000'000;
   const double z[] = {-4.0, -3.5, -3.0, -2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0, 3.0, 3.5, 4.0};
   std::vector<long> below(std::size(z), 0);
   double sum = 0.0, sum2 = 0.0, sum4 = 0.0;
   for (int i = 0; i < n; ++i) {
-    const double x = g();
+    const double x = g.normal();
     sum += x;
     sum2 += x * x;
     sum4 += x * x * x * x;
@@ -285,14 +224,12 @@ TEST_CASE("neuromech: the motor-noise Gaussian source is standard normal and det
     INFO("P(x < " << z[j] << ") = " << static_cast<double>(below[j]) / n << ", expected " << p);
     CHECK(std::abs(static_cast<double>(below[j]) / n - p) < 5.0 * se + 1e-7);
   }
-  GaussianSource a, b;
-  a.seed(7);
-  b.seed(7);
+  PortableRng a(7), b(7);
   bool same = true;
-  for (int i = 0; i < 1000; ++i) same = same && a() == b();
+  for (int i = 0; i < 1000; ++i) same = same && a.normal() == b.normal();
   CHECK(same);
   b.seed(8);
-  CHECK(a() != b());
+  CHECK(a.normal() != b.normal());
 }
 
 TEST_CASE("neuromech: endpoint dynamics agree with TwoLinkArm (eq. 1-2, 16)") {
@@ -497,12 +434,12 @@ TEST_CASE("neuromech: begin_trial, endpoint_dynamics, advance and the truth func
   p.step_s = p.session_step_s;                   // 4 kHz model: 0.25 ms plant steps, and 16 kHz sub-steps below
   for (auto& f : p.feedback) f.enabled = true;  // largest delay line in use
   NeuromechanicalArm arm(p);
-  const TestPlant plant;
+  const PlantParams plant = test_plant();
   PerturbationProfile prof;
   ReachSpec r;
   r.lateral_bow_m = 0.005;
-  const long before = g_allocations.load();
   Mat2 d, k;
+  manip::test::GlobalAllocScope allocs;
   for (std::uint64_t trial = 0; trial < 3; ++trial) {
     arm.begin_trial(r, trial);
     for (int n = 0; n < 8000; ++n) {
@@ -513,11 +450,11 @@ TEST_CASE("neuromech: begin_trial, endpoint_dynamics, advance and the truth func
     }
     for (int n = 0; n < 400; ++n) plant_step(arm, plant, Vec2::Zero(), 0.0625e-3);  // sub-stepped (manip_rt's 16 kHz)
   }
-  const long after = g_allocations.load();
-  CHECK(after - before == 0);
+  CHECK(allocs.news() == 0);
   // The counter works: a std::vector allocates.
+  const long after = allocs.news();
   std::vector<int> v(3);
-  CHECK(g_allocations.load() > after);
+  CHECK(allocs.news() > after);
 }
 
 TEST_CASE("neuromech: endpoint_impedance is the linearisation of the endpoint dynamics (finite differences)") {
@@ -540,7 +477,7 @@ TEST_CASE("neuromech: endpoint_impedance is the linearisation of the endpoint dy
   NeuromechParams p;
   for (auto& f : p.feedback) f.enabled = true;
   NeuromechanicalArm arm(p);
-  const TestPlant plant;
+  const PlantParams plant = test_plant();
   PerturbationProfile prof;
   ReachSpec r;
   arm.begin_trial(r, 3);
@@ -571,7 +508,7 @@ TEST_CASE("neuromech: intrinsic endpoint impedance at mid-reach lies in the lite
   NeuromechParams p = quiet(NeuromechParams{});
   p.disable_feedback();
   NeuromechanicalArm arm(p);
-  const TestPlant plant;
+  const PlantParams plant = test_plant();
   arm.begin_trial(ReachSpec{}, 1);
   while (arm.hand_position_m().y() < 0.40) plant_step(arm, plant, Vec2::Zero(), 0.25e-3);
   Mat2 d, k, d_s, k_s;
@@ -689,7 +626,7 @@ TEST_CASE("neuromech: a small pulse on the arm at rest follows the exact solutio
   // (forces from the start of the step) first order.
   NeuromechParams p = quiet(NeuromechParams{});
   p.disable_feedback();
-  const TestPlant plant;
+  const PlantParams plant = test_plant();
   PerturbationProfile prof;
   prof.amplitude_n = 0.015;
   ReachSpec still;
@@ -751,100 +688,4 @@ TEST_CASE("neuromech: a small pulse on the arm at rest follows the exact solutio
   CHECK(peak > 10e-6);
   CHECK(mid4 < 1e-4);
   CHECK(mid4 < 0.25 * exp4);
-}
-
-// Figures for the report (not a pass/fail test): run with `test_sim "[report]"`.
-TEST_CASE("neuromech: report figures", "[.][report]") {
-  // Max deviations under the 15 N pulse, paper configuration, with and without noise.
-  for (const bool noise : {false, true}) {
-    NeuromechParams p = noise ? NeuromechParams{} : quiet(NeuromechParams{});
-    NeuromechanicalArm arm(p);
-    std::vector<double> d1, d2;
-    int seed = 0;
-    for (const double angle : {30.0, 60.0, 120.0, 150.0, 210.0, 240.0, 300.0, 330.0}) {
-      ReachSpec r;
-      const Trial twin = run_trial(arm, r, static_cast<std::uint64_t>(++seed), 0.0, angle * kDeg);
-      const Trial pert = run_trial(arm, r, static_cast<std::uint64_t>(seed), 15.0, angle * kDeg);
-      const Vec2 dev = max_deviation(pert, twin);
-      d1.push_back(dev(0) * 1e3);
-      d2.push_back(dev(1) * 1e3);
-      std::printf("paper config, noise %d, angle %5.0f: max dev x1 %.2f mm x2 %.2f mm\n", noise, angle, dev(0) * 1e3,
-                  dev(1) * 1e3);
-    }
-    const auto ms = [](const std::vector<double>& v) {
-      double m = 0, s = 0;
-      for (double x : v) m += x;
-      m /= static_cast<double>(v.size());
-      for (double x : v) s += (x - m) * (x - m);
-      return std::pair{m, std::sqrt(s / static_cast<double>(v.size() - 1))};
-    };
-    const auto [m1, s1] = ms(d1);
-    const auto [m2, s2] = ms(d2);
-    std::printf("paper config, noise %d: mean (std) max dev x1 %.2f (%.2f) mm, x2 %.2f (%.2f) mm\n", noise, m1, s1, m2, s2);
-  }
-  // Time course of the response to the pulse, per feedback configuration.
-  for (int cfg = 0; cfg < 4; ++cfg) {
-    NeuromechParams p = quiet(NeuromechParams{});
-    p.pathway(Pathway::kShortLatency).enabled = cfg == 2 || cfg == 3;
-    p.pathway(Pathway::kLongLatency).enabled = cfg == 1 || cfg == 3;
-    p.pathway(Pathway::kVoluntary).enabled = cfg == 3;
-    NeuromechanicalArm arm(p);
-    ReachSpec r;
-    const Trial twin = run_trial(arm, r, 5, 0.0, 150 * kDeg, 4000.0, 1.0);
-    const Trial pert = run_trial(arm, r, 5, 15.0, 150 * kDeg, 4000.0, 1.0);
-    std::printf("config %d response |dx| [mm] every 100 ms after onset:", cfg);
-    for (std::size_t k = static_cast<std::size_t>(pert.onset); k < pert.x.size(); k += 400)
-      std::printf(" %.2f", (pert.x[k] - twin.x[k]).norm() * 1e3);
-    std::printf("\n");
-  }
-  // Tracking error of the unperturbed reach with noise (paper configuration).
-  {
-    NeuromechanicalArm arm(NeuromechParams{});
-    double worst = 0.0, end = 0.0;
-    for (std::uint64_t seed = 1; seed <= 10; ++seed) {
-      const Trial t = run_trial(arm, ReachSpec{}, seed, 0.0, 0.0);
-      for (std::size_t k = 0; k < t.x.size(); ++k) worst = std::max(worst, (t.x[k] - t.plan[k]).norm());
-      end = std::max(end, (t.x.back() - t.plan.back()).norm());
-    }
-    std::printf("paper config with noise, 10 reaches: max |x - plan| %.3f mm, at the end %.3f mm\n", worst * 1e3,
-                end * 1e3);
-  }
-  // Endpoint impedance at mid-reach (x2 = 0.40 m), intrinsic only, and the reflex gains.
-  {
-    NeuromechParams p = quiet(NeuromechParams{});
-    for (auto& f : p.feedback) f.enabled = true;
-    NeuromechanicalArm arm(p);
-    arm.begin_trial(ReachSpec{}, 1);
-    const TestPlant plant;
-    while (arm.hand_position_m().y() < 0.40) plant_step(arm, plant, Vec2::Zero(), 0.25e-3);
-    Mat2 d, k, d_s, k_s;
-    arm.endpoint_impedance(d, k);
-    arm.endpoint_impedance_eq16_18(d_s, k_s);
-    const auto pr = [](const char* what, const Mat2& m) {
-      const auto e = sym_eig(m);
-      std::printf("%-28s [[%8.2f %8.2f] [%8.2f %8.2f]]  sym eig %.1f %.1f\n", what, m(0, 0), m(0, 1), m(1, 0), m(1, 1),
-                  e(0), e(1));
-    };
-    std::printf("at x = (%.3f, %.3f) m, t = %.3f s, M_x:\n", arm.hand_position_m()(0), arm.hand_position_m()(1),
-                arm.time_s());
-    Mat2 m_x;
-    Vec2 h;
-    arm.endpoint_dynamics(m_x, h);
-    pr("M_x [kg]", m_x);
-    pr("K full [N/m]", k);
-    pr("K eq.18 [N/m]", k_s);
-    pr("D full [Ns/m]", d);
-    pr("D eq.17 [Ns/m]", d_s);
-    for (int i = 0; i < kPathways; ++i) {
-      arm.reflex_endpoint_gains(static_cast<Pathway>(i), d, k);
-      std::printf("%s (%.0f ms):\n", pathway_name(static_cast<Pathway>(i)), p.feedback[static_cast<std::size_t>(i)].delay_s * 1e3);
-      pr("  K reflex [N/m]", k);
-      pr("  D reflex [Ns/m]", d);
-    }
-    std::printf("activations [N]: %s\n", [&] {
-      std::ostringstream s;
-      s << arm.activations_n().transpose();
-      return s.str();
-    }().c_str());
-  }
 }

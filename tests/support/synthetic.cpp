@@ -32,7 +32,7 @@ struct Collector final : logging::SessionHandler {
 
 Recorded record(const sim::SessionDesign& d, const sim::LinearHumanParams& p0) {
   auto p = p0;
-  p.sample_rate_hz = d.sample_rate_hz * d.substeps;
+  p.sample_rate_hz = d.session.sample_rate_hz * d.substeps;
   sim::LinearImpedanceHuman h(p);
   Collector c;
   sim::run_session(d, h, c);
@@ -60,7 +60,7 @@ MemorySession simulate_in_memory(const sim::SessionDesign& d, const sim::LinearH
     ms.trials.push_back(std::move(t));
   });
   auto p = p0;
-  p.sample_rate_hz = d.sample_rate_hz * d.substeps;
+  p.sample_rate_hz = d.session.sample_rate_hz * d.substeps;
   sim::LinearImpedanceHuman h(p);
   sim::run_session(d, h, asmb);
   asmb.finish();

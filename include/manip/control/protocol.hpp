@@ -43,6 +43,9 @@ struct TrialSpec {
 // The initial schedule for a configuration (deterministic per seed).
 std::vector<TrialSpec> make_schedule(const ProtocolConfig& protocol, const PerturbationConfig& perturbation,
                                      int perturbed_count);
+// The same from plain values (the simulator's session runner reuses it).
+std::vector<TrialSpec> make_schedule(int movements, const std::vector<double>& angles_deg, int repeats_per_angle,
+                                     int perturbed_count, std::uint64_t seed);
 
 struct ProtocolEvents {
   std::array<TrialEventRecord, 4> ev{};

@@ -1,6 +1,7 @@
 #pragma once
 // Levenberg-Marquardt on a residual function with a forward-difference
-// Jacobian. Shared by the output-error and prediction-error fits.
+// Jacobian. Used by the output-error fit (output_error.cpp); the prediction-
+// error fit (pem.cpp) maximises its likelihood by Fisher scoring instead.
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>

@@ -15,57 +15,14 @@
 #include "manip/dsp/welch.hpp"
 
 #include "manip/estimation/impedance.hpp"
+#include "manip/estimation/methods/registry.hpp"
 #include "manip/estimation/pem.hpp"
+#include "manip/estimation/settings.hpp"
+#include "manip/estimation/summary.hpp"
 #include "manip/estimation/trial_data.hpp"
 #include "manip/estimation/variational.hpp"
 
 namespace manip::estimation {
-
-// Method names (docs/estimator.md):
-//   paper         per-trial equation error on high-pass-isolated signals (§3, eq. 30-32); mean (std) over trials
-//   paper-pooled  the same signals, one fit over all perturbed trials; estimate (SE, 95% CI)
-//   pem           default: pooled causal prediction error (maximum likelihood) with a model of the person's
-//                 own motion and motor noise (pem.hpp); sandwich SE, 95% CI
-//   oe            pooled causal output error with per-trial polynomial; jackknife SE, 95% CI
-//   oe-trial      the output-error fit per trial; mean (std) over trials
-std::vector<std::string> all_methods();
-std::string default_method();
-
-struct EstimatorSettings {
-  PipelineSettings pipeline{};
-  bool cutoff_auto{false};
-  double cutoff_auto_threshold_db{3.0};
-  int psd_nfft{65536};
-  LsOptions ls{};
-  OeSettings oe{};
-  PemSettings pem{};
-  std::vector<std::string> methods{default_method()};
-  bool keep_windows{false};  // keep variational windows for --export-signals / --plots
-};
-
-struct TrialResult {
-  int trial{-1};
-  double angle_deg{0};
-  std::string method;
-  ImpedanceEstimate est;
-  // Validation against a simulator's twin (NaN for lab logs): NRMSE of Δx at T_est per axis.
-  Vec2 nrmse_dx{Vec2::Constant(std::numeric_limits<double>::quiet_NaN())};
-};
-
-struct Summary {
-  std::string method;
-  std::string group;        // "session" or "angle 30" etc.
-  std::string kind;         // "mean (std) over trials" or "pooled fit"
-  int n_trials{0};
-  Mat2 d_nspm{Mat2::Zero()}, k_npm{Mat2::Zero()};
-  Mat2 d_spread{Mat2::Zero()}, k_spread{Mat2::Zero()};  // std over trials, or SE of the pooled fit
-  Mat2 d_lo{Mat2::Zero()}, d_hi{Mat2::Zero()}, k_lo{Mat2::Zero()}, k_hi{Mat2::Zero()};  // 95% interval
-  Mat2 m_kg{Mat2::Zero()};
-  bool identifiable{true};
-  std::string flag;
-  int n_flagged_trials{0};
-  std::optional<DisturbanceModel> disturbance;  // pem: the fitted model of the person's own motion
-};
 
 struct PsdReport {
   std::vector<double> f_hz, p_unperturbed, p_perturbed;
@@ -109,15 +66,15 @@ class SessionEstimator {
   Report finish(std::vector<TrialIssue> issues, std::vector<std::string> warnings);
 
  private:
-  // Per perturbed trial: M_BSP at onset, isolated signals, OE window (or the
-  // reason it could not be used), in trial order.
+  // Per perturbed trial: M_BSP at onset, isolated signals, the windows the
+  // selected methods need (or the reason it could not be used), in trial order.
   struct Prepared {
     int trial{-1};
     std::optional<std::string> error;
     VariationalWindow vw;
     Mat2 m_bsp{Mat2::Zero()};
-    OeWindow ow;
-    OeWindow pw;  // the prediction-error window (its own pre-onset span)
+    OeWindow ow;  // output-error window, if a selected method needs it
+    OeWindow pw;  // prediction-error window (its own pre-onset span), if needed
     bool has_truth{false};
     Mat2 truth_d{Mat2::Zero()}, truth_k{Mat2::Zero()}, truth_m{Mat2::Zero()};
     std::string truth_model;
@@ -126,6 +83,8 @@ class SessionEstimator {
   Prepared prepare(const TrialData& t, const PipelineSettings& pipe, std::span<const double> jerk_x2) const;
 
   EstimatorSettings s_;
+  std::vector<const Method*> methods_;  // s_.methods resolved in the registry
+  DataWindow windows_{DataWindow::variational};  // union of their needs
   SessionInfo info_;
   bool have_info_{false};
   std::vector<TrialData> perturbed_;  // cutoff_auto only
@@ -138,8 +97,9 @@ class SessionEstimator {
   dsp::Psd psd_;
 };
 
-// Convenience: read a log file and estimate. Throws std::runtime_error for
-// unusable files (message names the file and the reason). The log is decoded
+// Convenience: read a log file and estimate. Throws manip::InputError for
+// unusable files (message names the file and the reason, e.g. an invalid
+// session message names the field). The log is decoded
 // on the calling thread while a second thread runs SessionEstimator::add_trial
 // on each trial as it completes (a bounded queue of a few trials between them
 // keeps memory bounded); the result is identical to a sequential run, since

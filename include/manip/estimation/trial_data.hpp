@@ -14,23 +14,16 @@
 #include "manip/common/frames.hpp"
 #include "manip/logging/session_stream.hpp"
 #include "manip/model/arm.hpp"
+#include "manip/schema/session_description.hpp"
 
 namespace manip::estimation {
 
-struct SessionInfo {
-  double fs_hz{4000.0};
-  Mat2 m_adm_kg{Mat2::Identity() * 5.0};
-  Mat2 d_adm_nspm{Mat2::Identity() * 15.0};
-  Mat2 m_handle_kg{Mat2::Zero()};
-  WorkspaceToShoulder frame{};
-  Anthropometrics anthropometrics{};
-  double pert_duration_s{0.15};
-  double pert_amplitude_n{15.0};
-  double trigger_x2_shoulder_m{0.40};
-  std::string source, software_version, participant_id, session_id;
-  int schema_version{0};
-};
+// The session as the estimator sees it is the one session description
+// (schema/session_description.hpp): no second copy with its own defaults.
+using SessionInfo = schema::SessionDescription;
 
+// schema::from_message, refused with manip::InputError ("session message:
+// <field>: <reason>", exit code 4) when invalid_reason() is set.
 SessionInfo session_info_from(const manip::session_t& msg);
 
 // Samples of one trial, shoulder frame, index 0 = the START cycle.

@@ -3,20 +3,29 @@
 // admittance (eq. 19-20). With the hand rigidly on the handle:
 //   (M_x + M_adm + M_handle) xdd = h - D_adm xd + u_pert
 // and the force sensor reads f_s = M_adm xdd + D_adm xd - u_pert (force of the
-// hand side on the sensor). Shoulder-frame axes; M_adm, D_adm diagonal per the
-// session message, so frame rotation does not change them.
+// hand side on the sensor). Shoulder frame throughout. The matrices come from
+// the session description (schema::SessionDescription), the one source of
+// M_adm, D_adm and the handle mass, so the simulated plant is the one the
+// session message describes to the estimator.
 #include <Eigen/Cholesky>
 
 #include "manip/common/types.hpp"
+#include "manip/schema/session_description.hpp"
 #include "manip/sim/human.hpp"
 
 namespace manip::sim {
 
-struct AdmittanceParams {
-  Mat2 m_adm_kg{Mat2::Identity() * 5.0};     // paper §5.1
-  Mat2 d_adm_nspm{Mat2::Identity() * 15.0};  // paper §5.1
-  Mat2 m_handle_kg{Mat2::Identity() * 0.3};  // handle above the sensor (config/participant.yaml rationale)
+// The plant of eq. 19-20 in the shoulder frame.
+struct PlantParams {
+  Mat2 m_adm_kg{Mat2::Zero()};
+  Mat2 d_adm_nspm{Mat2::Zero()};
+  Mat2 m_handle_kg{Mat2::Zero()};
 };
+
+// R diag(.) R^T of the session's per-axis values (eq. 19-20 in the shoulder frame).
+inline PlantParams plant_params(const schema::SessionDescription& s) {
+  return PlantParams{s.m_adm_shoulder_kg(), s.d_adm_shoulder_nspm(), s.m_handle_shoulder_kg()};
+}
 
 struct PlantSample {
   Vec2 xdd_mps2{Vec2::Zero()};
@@ -31,8 +40,8 @@ struct PlantSample {
 // (M + dt/2 D_adm)): second order, so a 4 kHz step is accurate (docs/simulation.md).
 // The force sensor reads the admittance at the start of the step either way.
 // Never allocates.
-inline PlantSample step_ideal_admittance(HumanModel& human, const AdmittanceParams& p, const Vec2& u_pert_n,
-                                         double dt_s, bool midpoint = false) {
+inline PlantSample step_ideal_admittance(HumanModel& human, const PlantParams& p, const Vec2& u_pert_n, double dt_s,
+                                         bool midpoint = false) {
   Mat2 m_x;
   Vec2 h;
   if (midpoint)

@@ -11,9 +11,9 @@
 //   f_ff = (M + M_load) xdd_plan + D_load xd_plan                 expected load = admittance
 #include <array>
 #include <cstdint>
-#include <random>
 #include <vector>
 
+#include "manip/common/rng.hpp"
 #include "manip/sim/human.hpp"
 
 namespace manip::sim {
@@ -54,8 +54,7 @@ class LinearImpedanceHuman final : public HumanModel, public TruthSource {
   double t_{0};
   Vec2 x_{Vec2::Zero()}, xd_{Vec2::Zero()};
   Vec2 noise_{Vec2::Zero()};
-  std::mt19937_64 rng_;
-  std::normal_distribution<double> gauss_{0.0, 1.0};
+  PortableRng rng_;  // motor noise: portable, so a seed reproduces the log with any standard library
   std::vector<std::array<double, 4>> delay_;  // ring of (e, ed) per axis
   std::size_t delay_head_{0};
 };

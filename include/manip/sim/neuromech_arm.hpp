@@ -23,7 +23,7 @@
 //                variance, correlation time tau, exact update per step, started in its
 //                stationary distribution): Brownian motion with mean reversion, so the
 //                noise is zero-mean and bounded over a trial; signal-dependent via cv.
-//                nu comes from GaussianSource seeded by begin_trial's seed: paired runs
+//                nu comes from manip::PortableRng seeded by begin_trial's seed: paired runs
 //                share nu exactly (its amplitude follows each run's own command).
 //                Activations are in tension units [N] (eq. 33: m_A = a).
 //   tension      m = max(0, a + D_m ed_m + K_m e_m),  K_m = K0 + K1 a,  D_m = K_m / r
@@ -88,10 +88,10 @@
 
 #include <Eigen/Core>
 
+#include "manip/common/rng.hpp"
 #include "manip/common/types.hpp"
 #include "manip/model/arm.hpp"
 #include "manip/sim/human.hpp"
-#include "manip/sim/session_runner.hpp"  // TruthSource
 
 namespace manip::sim {
 
@@ -99,27 +99,6 @@ inline constexpr int kMuscles = 6;  // shoulder flexor, shoulder extensor, elbow
                                     // elbow extensor, biarticular flexor, biarticular extensor
 using MuscleVec = Eigen::Matrix<double, kMuscles, 1>;
 using MomentArms = Eigen::Matrix<double, 2, kMuscles>;  // rows: shoulder, elbow [m]
-
-// Deterministic standard-normal source for the motor noise: xoshiro256++
-// (Blackman & Vigna 2018) seeded through splitmix64, and the 128-layer ziggurat
-// (Marsaglia & Tsang 2000; layer index and value from separate bits of one 64-bit
-// draw, avoiding the original's correlation, Doornik 2005). 4-9 ns per draw here
-// against 30-40 ns for std::normal_distribution + std::mt19937_64 (whose output is
-// implementation-defined: this one is identical on every platform). No allocation.
-class GaussianSource {
- public:
-  GaussianSource();
-  void seed(std::uint64_t s);
-  double operator()();
-  std::uint64_t next_u64();
-
- private:
-  double uniform_open();  // (0, 1)
-  double tail(std::int64_t hz, unsigned iz);
-  std::array<std::uint64_t, 4> s_{};
-  std::array<std::uint32_t, 128> kn_{};
-  std::array<double, 128> wn_{}, fn_{};
-};
 
 enum class Pathway : int { kShortLatency = 0, kLongLatency = 1, kVoluntary = 2 };
 inline constexpr int kPathways = 3;
@@ -147,7 +126,7 @@ struct NeuromechParams {
   double stiffness_to_damping_per_s{12.0};  // D_m = K_m / this (eq. 35)
   MuscleVec tonic_activation_n{MuscleVec::Constant(26.0)};
   bool feedforward_enabled{true};
-  Vec2 load_mass_kg{5.3, 5.3};       // expected M_adm + M_handle per axis
+  Vec2 load_mass_kg{5.25, 5.25};     // expected M_adm + M_handle per axis (session defaults: 5 + 0.25 kg)
   Vec2 load_damping_nspm{15.0, 15.0};  // expected D_adm per axis
   std::array<FeedbackPathwayParams, kPathways> feedback{{
       {false, 0.025, 1000.0, 50.0},    // short-latency
@@ -170,8 +149,9 @@ struct NeuromechParams {
 };
 
 // Loads and validates a YAML file with exactly the keys of config/arm_model.yaml.
-// Throws std::runtime_error "<file>: <key>: <reason>" (one line) for a missing key,
-// an unknown key, a wrong type or shape, or an invalid value.
+// Throws manip::ConfigError "<file>[:<line>]: <key>: <reason>" (one line; the
+// common strict reader, common/yaml_reader.hpp) for a missing, unknown or
+// duplicate key, a wrong type or shape, or an invalid value.
 NeuromechParams load_neuromech_params(const std::string& yaml_path);
 // The same keys as YAML text (no comments); load_neuromech_params reads it back.
 std::string neuromech_params_to_yaml(const NeuromechParams& p);
@@ -278,7 +258,7 @@ class NeuromechanicalArm final : public HumanModel, public TruthSource {
   std::vector<double> ring_;  // per step: q - q_d (2), qd - qd_d (2)
   MuscleVec noise_{MuscleVec::Zero()};
   double noise_rho_{0.0}, noise_sigma_{0.0};  // exact OU update coefficients per step
-  GaussianSource gauss_{};
+  PortableRng rng_{};  // nu of eq. 3: portable, so a seed reproduces the log with any standard library
 };
 
 }  // namespace manip::sim

@@ -6,21 +6,37 @@
 // Each perturbed trial is simulated twice with the same seed: unperturbed
 // (the twin) and perturbed; Δ = perturbed - twin is the true variational
 // dynamics.
+//
+// What the runner shares with the controller (so a simulated log means what a
+// lab log means): the trial schedule (control::make_schedule), the perturbation
+// trigger (control::PerturbationTrigger: first crossing of x2 = trigger while
+// moving towards the goal), the phase and mode codes (schema/codes.hpp), the
+// session description (schema::SessionDescription, sent with schema::to_message)
+// and the portable RNG (common/rng.hpp), so a seed reproduces the log with any
+// standard library.
 #include <cstdint>
 #include <string>
 #include <vector>
 
-#include "manip/common/frames.hpp"
 #include "manip/common/perturbation.hpp"
+#include "manip/control/protocol.hpp"
 #include "manip/logging/session_stream.hpp"
-#include "manip/model/arm.hpp"
+#include "manip/schema/session_description.hpp"
 #include "manip/sim/human.hpp"
 #include "manip/sim/ideal_admittance.hpp"
 
 namespace manip::sim {
 
+// manip_sim's session description: the schema defaults (paper §5.1 apparatus,
+// 0.25 kg handle) with the simulator's ids; the ideal admittance has no drive
+// downsampling, so the drive rate equals the sample rate.
+schema::SessionDescription default_sim_session();
+
 struct SessionDesign {
-  double sample_rate_hz{4000.0};
+  // Admittance, handle mass, frame, anthropometrics, perturbation design
+  // (T_pert, A_pert, trigger line), sample rate and ids: the one description,
+  // sent as the log's session message and used as the simulated plant.
+  schema::SessionDescription session{default_sim_session()};
   int substeps{4};                        // integration steps per sample (semi-implicit Euler at 16 kHz)
   bool midpoint_plant{false};             // step_ideal_admittance(..., midpoint): manip_sim's neuromech arm at 4 kHz
   int n_movements{100};                   // paper §5.2
@@ -29,25 +45,25 @@ struct SessionDesign {
   bool write_twins{true};                 // MANIP_TRUTH_STATE for perturbed trials
   Vec2 start_shoulder_m{0.0, 0.30};
   Vec2 goal_shoulder_m{0.0, 0.55};
-  double trigger_x2_shoulder_m{0.40};
-  PerturbationProfile perturbation{};
   double reach_duration_s{3.0};
   double reach_duration_jitter_s{0.0};    // uniform +- jitter
   double lateral_bow_std_m{0.0};          // path variation, normal std
   double rest_before_s{0.5};              // in the start target before the go cue (inside the trial)
   double rest_after_s{0.5};               // in the goal target before END
   double return_s{0.8};                   // return movement between trials (trial = -1)
+  // GOAL_HOLD is logged while the measured hand rests in the goal target: the
+  // controller's criterion (control::Protocol::in_goal) with its default radius
+  // and speed (config/rt.yaml protocol.target_radius_m, rest_speed_mps).
+  double target_radius_m{0.01};
+  double rest_speed_mps{0.01};
   double encoder_resolution_m{1e-6};      // paper §5.1; 0 = no quantisation
   double force_noise_n{0.0};              // force-sensor white noise std per axis
   double t_est_s{0.15};                   // window over which the truth is averaged
-  AdmittanceParams admittance{};
-  WorkspaceToShoulder frame{};
-  Anthropometrics anthropometrics{};
-  std::uint64_t seed{1};
-  std::string source{"manip_sim"};
-  std::string participant_id{"sim"};
-  std::string session_id{"sim-0"};
-  std::string config_yaml;
+  std::uint64_t seed{1};                  // schedule (control::make_schedule), reaches, sensor noise, human noise
+
+  [[nodiscard]] PerturbationProfile perturbation() const {
+    return PerturbationProfile{session.perturbation.duration_s, session.perturbation.amplitude_n};
+  }
 };
 
 struct SessionRunSummary {
@@ -59,10 +75,12 @@ struct SessionRunSummary {
 };
 
 // Runs the whole session into `out`. The human is reset per trial via begin_trial.
+// Throws std::invalid_argument for a design that cannot run.
 SessionRunSummary run_session(const SessionDesign& design, HumanModel& human, logging::SessionHandler& out);
 
-// The perturbed/unperturbed schedule the runner uses: for each movement the
-// perturbation angle in degrees, or NaN if unperturbed. Deterministic per seed.
-std::vector<double> perturbation_schedule(const SessionDesign& design);
+// The perturbed/unperturbed schedule the runner uses: the controller's
+// (control::make_schedule with the design's seed), so a seed gives the same
+// schedule in manip_sim and manip_rt.
+std::vector<control::TrialSpec> perturbation_schedule(const SessionDesign& design);
 
 }  // namespace manip::sim
