@@ -33,9 +33,6 @@ void TrialAssembler::on_session(const manip::session_t& msg) {
   info_ = session_info_from(msg);
   rot_ = info_.frame.rotation();
   has_session_ = true;
-  if (!(info_.sample_rate_hz > 0.0)) throw std::runtime_error("session message: sample_rate_hz must be positive");
-  if (const auto why = info_.anthropometrics.invalid_reason())
-    warnings_.push_back("session message: anthropometrics invalid (" + *why + "); M_BSP cannot be computed");
 }
 
 void TrialAssembler::drop(const std::string& reason) {

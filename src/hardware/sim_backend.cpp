@@ -4,38 +4,31 @@
 
 #include <cmath>
 
-#include "manip/sim/linear_human.hpp"
-#include "manip/sim/neuromech_arm.hpp"
+#include "manip/sim/human_factory.hpp"
 
 namespace manip::hardware {
 
 std::unique_ptr<sim::HumanModel> make_sim_human(const control::ControlConfig& law, const SimConfig& sim) {
+  // The one human-model factory (sim/human_factory.hpp), at the backend's plant
+  // step: it refuses a substep the model cannot integrate (a neuromech arm whose
+  // integration step does not divide 1/(f_s substeps)) at start-up.
   const auto& h = sim.human;
-  if (h.model == "neuromech") {
-    // Throws (file: key: reason) on a bad YAML; advance() rejects a substep
-    // that is not a multiple of the arm's integration step at the first cycle,
-    // so check it here, at start-up.
-    const auto np = sim::load_neuromech_params(h.arm_config);
-    const double dt = 1.0 / (law.session.sample_rate_hz * sim.substeps);
-    const double ratio = dt / np.step_s;
-    if (std::abs(ratio - std::round(ratio)) > 1e-6 * ratio || std::round(ratio) < 1.0)
-      throw ConfigError(h.arm_config + ": integration.step_s " + std::to_string(np.step_s) +
-                               " s does not divide the sim substep " + std::to_string(dt) + " s");
-    return std::make_unique<sim::NeuromechanicalArm>(np);
-  }
-  sim::LinearHumanParams p;
-  p.m_kg = h.m_kg;
-  p.d_nspm = h.d_nspm;
-  p.k_npm = h.k_npm;
-  p.m_load_kg = h.m_load_kg;
-  p.d_load_nspm = h.d_load_nspm;
-  p.voluntary_delay_s = h.voluntary_delay_s;
-  p.k_voluntary_npm = h.k_voluntary_npm;
-  p.d_voluntary_nspm = h.d_voluntary_nspm;
-  p.motor_noise_n = h.motor_noise_n;
-  p.motor_noise_tau_s = h.motor_noise_tau_s;
-  p.sample_rate_hz = law.session.sample_rate_hz * sim.substeps;  // advance() runs once per substep
-  return std::make_unique<sim::LinearImpedanceHuman>(p);
+  sim::HumanSpec spec;
+  spec.model = h.model;
+  spec.sample_rate_hz = law.session.sample_rate_hz;
+  spec.plant_step_s = 1.0 / (law.session.sample_rate_hz * sim.substeps);
+  spec.arm_config = h.arm_config;
+  spec.linear.m_kg = h.m_kg;
+  spec.linear.d_nspm = h.d_nspm;
+  spec.linear.k_npm = h.k_npm;
+  spec.linear.m_load_kg = h.m_load_kg;
+  spec.linear.d_load_nspm = h.d_load_nspm;
+  spec.linear.voluntary_delay_s = h.voluntary_delay_s;
+  spec.linear.k_voluntary_npm = h.k_voluntary_npm;
+  spec.linear.d_voluntary_nspm = h.d_voluntary_nspm;
+  spec.linear.motor_noise_n = h.motor_noise_n;
+  spec.linear.motor_noise_tau_s = h.motor_noise_tau_s;
+  return sim::make_human(spec).model;
 }
 
 SimBackend::SimBackend(const control::ControlConfig& law, const SimConfig& sim,

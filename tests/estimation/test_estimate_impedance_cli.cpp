@@ -68,7 +68,7 @@ TEST_CASE("estimate_impedance: exit codes of the executable", "[cli]") {
   CHECK(run(good + " --config " + dir + "/missing.yaml", &out) == ec::kConfig);
   CHECK(run(dir + "/missing.lcm -q", &out) == ec::kInput);
   CHECK(run(dir + "/bad_session.lcm -q", &out) == ec::kInput);
-  CHECK(out.find("bad_session.lcm: session message: sample_rate_hz") != std::string::npos);
+  CHECK(out.find("bad_session.lcm: byte 0 (MANIP_SESSION): session message: sample_rate_hz") != std::string::npos);
   // One log unusable, the other still estimated and printed.
   CHECK(run(dir + "/bad_session.lcm " + good + " -q --method paper-pooled", &out) == ec::kInput);
   CHECK(out.find("method paper-pooled: pooled fit") != std::string::npos);

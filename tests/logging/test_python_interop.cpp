@@ -3,9 +3,14 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
 
 #include "fixtures.hpp"
 #include "manip/estimation/session_estimator.hpp"
+#include "manip/logging/session_stream.hpp"
+#include "manip/schema/codes.hpp"
 
 using namespace manip;
 
@@ -30,4 +35,40 @@ TEST_CASE("python interop: a log written by Python's lcm package is read and est
       CHECK((sm.k_npm - k_true).norm() < 0.1 * k_true.norm());
       CHECK((sm.d_nspm - d_true).norm() < 0.15 * d_true.norm());
     }
+}
+
+TEST_CASE("python interop: the README example classifies states by the schema's named constants", "[python]") {
+  // Python writes a log with codes taken from the generated constants; the C++
+  // reader's counts per phase (schema::Phase) must equal Python's counts per
+  // PHASE_* name, and every in-trial state must be REACH or PERTURBATION.
+  const std::string py = MANIP_PYTHON;
+  REQUIRE(std::filesystem::exists(py));
+  const auto dir = testutil::temp_dir("pyconst");
+  const std::string log = dir + "/py.lcm";
+  REQUIRE(std::system((py + " " + testutil::fixture_path("logging/write_python_log.py") + " " + MANIP_BINARY_DIR +
+                       "/python " + log).c_str()) == 0);
+  const std::string out = dir + "/counts.txt";
+  REQUIRE(std::system((py + " " + testutil::fixture_path("logging/count_phases.py") + " " + MANIP_BINARY_DIR +
+                       "/python " + log + " > " + out).c_str()) == 0);
+  std::map<std::string, long> py_counts;
+  {
+    std::ifstream f(out);
+    std::string name;
+    long n = 0;
+    while (f >> name >> n) py_counts[name] = n;
+  }
+  struct Counter : logging::SessionHandler {
+    std::map<std::string, long> by_phase;
+    long running = 0;
+    void on_state(const manip::state_t& s) override {
+      by_phase[std::string("PHASE_") + schema::phase_name(static_cast<schema::Phase>(s.phase))]++;
+      running += s.mode == static_cast<std::int8_t>(schema::Mode::kRunning);
+    }
+  } c;
+  logging::read_log(log, c);
+  CHECK(py_counts.at("MODE_RUNNING") == c.running);
+  CHECK(c.running > 0);
+  CHECK(c.by_phase["PHASE_PERTURBATION"] > 0);
+  CHECK(c.by_phase["PHASE_REACH"] > 0);
+  for (const auto& [name, n] : c.by_phase) CHECK(py_counts.at(name) == n);
 }

@@ -1,0 +1,116 @@
+#pragma once
+// The diagnosis engine: baseline fit, misfit signatures, mechanism search by
+// cross-validation over contiguous blocks with a guard gap, greedy extension,
+// and the measured gain with block-bootstrap intervals (docs/diagnosis.md).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "manip/diagnosis/dataset.hpp"
+#include "manip/diagnosis/mechanisms.hpp"
+#include "manip/diagnosis/stats.hpp"
+
+namespace manip::diagnosis {
+
+struct EngineOptions {
+  int folds = 10;            // K-fold cross-validation over contiguous time blocks (or groups of segments)
+  int blocks_per_fold = 3;   // bootstrap resamples these blocks (K * blocks_per_fold in all)
+  double guard_s = 0.3;      // gap between folds: > reflex delay + filter memory, so test and training samples do not share a regressor's window
+  double min_fold_s = 2.0;   // shortest usable fold
+  double alpha = 0.05;       // family-wise level per greedy round (Holm over the candidates)
+  int bootstrap = 200;       // block-bootstrap replicates
+  std::uint64_t seed = 20261126;
+  std::function<void(const std::string&)> progress;  // one line per step (stderr in the app)
+};
+
+struct Interval {
+  double value = 0.0, lo = 0.0, hi = 0.0;  // estimate and 95 % percentile interval
+};
+
+struct ParamEstimate {
+  std::string name, unit;
+  Interval est;
+  double plausible_lo = 0.0, plausible_hi = 0.0;
+  bool has_bounds = false;
+  bool shape = false;  // searched on a grid bounded by [plausible_lo, plausible_hi]
+  [[nodiscard]] bool plausible() const {
+    return !has_bounds || (est.value >= plausible_lo && est.value <= plausible_hi);
+  }
+  // A shape estimate on the edge of its search range: the optimum may lie outside it.
+  [[nodiscard]] bool at_edge() const {
+    const double tol = 1e-9 * std::max(std::fabs(plausible_lo), std::fabs(plausible_hi));
+    return shape && (std::fabs(est.value - plausible_lo) <= tol || std::fabs(est.value - plausible_hi) <= tol);
+  }
+};
+
+struct CandidateScore {
+  std::string id, title, signature, not_applicable;
+  std::vector<double> fold_gain;  // relative held-out SSE reduction per fold
+  stats::OneSidedT test;
+  double p_holm = 1.0;
+  bool significant = false;
+  std::vector<ParamEstimate> params;  // fitted on all data (no interval)
+  std::vector<double> setting;        // chosen shape parameters on all data
+};
+
+struct Round {
+  std::vector<CandidateScore> candidates;
+  int accepted = -1;  // index into candidates
+};
+
+struct CrossCorr {
+  std::string regressor;
+  double rho = 0.0;    // largest |correlation| (signed) over the lags searched
+  double lag_s = 0.0;  // its lag (regressor delayed by lag)
+  double bound = 0.0;  // 95 % bound (Bartlett variance, Bonferroni over lags)
+  bool significant = false;
+};
+
+struct Signatures {
+  double resid_rms = 0.0, skewness = 0.0, skewness_se = 0.0, excess_kurtosis = 0.0, kurtosis_se = 0.0;
+  int decimation = 1;  // residual decimated to the smoother's bandwidth for these statistics
+  stats::LjungBox ljung_box;
+  std::vector<CrossCorr> xcorr;
+};
+
+struct HeldOut {
+  Interval vaf;    // 1 - SSE / SST over held-out folds, pooled
+  Interval nrmse;  // sqrt(SSE / SST)
+  std::vector<double> fold_vaf;
+};
+
+struct Diagnosis {
+  std::string source;
+  std::size_t n_used = 0;
+  double duration_s = 0.0;
+  int folds = 0, blocks = 0;
+  double guard_s = 0.0;
+  std::vector<ParamEstimate> baseline_params;
+  HeldOut baseline_heldout;
+  Signatures before, after;
+  std::vector<Round> rounds;
+  std::vector<std::string> accepted;        // mechanism ids, in the order added
+  std::vector<std::vector<double>> accepted_settings;
+  std::vector<ParamEstimate> final_params;  // base then each accepted mechanism's shape params and gains
+  HeldOut final_heldout;
+  Interval heldout_gain;                    // 1 - SSE_after / SSE_before over held-out folds
+  // RMS (about its mean) of each accepted mechanism's term in the extended
+  // model, and of the target: "how much of the torque is the reflex".
+  std::vector<double> contribution_rms;
+  double target_rms = 0.0;
+  double seconds = 0.0;
+  [[nodiscard]] bool misfit_found() const { return !accepted.empty(); }
+  [[nodiscard]] const ParamEstimate* find_final(const std::string& name) const;
+  [[nodiscard]] const ParamEstimate* find_baseline(const std::string& name) const;
+};
+
+// Throws manip::InputError (exit 4) when the data cannot support the
+// cross-validation (message says how much is needed).
+[[nodiscard]] Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism>>& library,
+                                 const EngineOptions& opt = {});
+
+}  // namespace manip::diagnosis

@@ -1,0 +1,61 @@
+#pragma once
+// The mechanism library: each entry is a parametric extension of the
+// baseline with a physical meaning, a signature that gives it away, and
+// plausible parameter bounds (docs/diagnosis.md lists the sources).
+// Parameters come in two kinds: "shape" parameters searched on a grid over
+// their physiological range (e.g. reflex delay), and gains, linear in the
+// model and solved by least squares for every grid point.
+#include <array>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "manip/diagnosis/dataset.hpp"
+
+namespace manip::diagnosis {
+
+struct ParamInfo {
+  std::string name, unit;
+  double plausible_lo, plausible_hi;  // physiological / physical bounds (report flags values outside)
+};
+
+class Mechanism {
+ public:
+  virtual ~Mechanism() = default;
+  [[nodiscard]] virtual std::string id() const = 0;
+  [[nodiscard]] virtual std::string title() const = 0;
+  [[nodiscard]] virtual std::string signature() const = 0;
+  // Empty when applicable, else why not.
+  [[nodiscard]] virtual std::string not_applicable(const Dataset&) const { return {}; }
+  [[nodiscard]] virtual std::vector<ParamInfo> shape_params() const { return {}; }
+  [[nodiscard]] virtual std::vector<ParamInfo> gains() const = 0;
+  // Grid of shape settings (one empty setting when there are none).
+  [[nodiscard]] virtual std::vector<std::vector<double>> grid(const Dataset&) const { return {{}}; }
+  // Smoothed columns for one setting.
+  [[nodiscard]] virtual Columns columns(const Dataset&, std::span<const double> setting) const = 0;
+  // All settings in an order the mechanism can compute cheaply; f(index into grid(), columns).
+  virtual void for_each_setting(const Dataset& d, const std::function<void(std::size_t, const Columns&)>& f) const;
+  // Samples of history the columns need at the start of a segment.
+  [[nodiscard]] virtual std::size_t history_samples(const Dataset&) const { return 0; }
+  // Index into [shape params..., gains...] of the parameter the tests check.
+  [[nodiscard]] virtual int main_param() const = 0;
+};
+
+// Stretch reflex (Hammerstein: Kearney, Stein & Parameswaran 1997): half-wave
+// rectified velocity, delayed by tau, through a second-order low pass
+// (natural frequency fn, damping zeta); one gain per stretch direction.
+// Columns: LP[max(v(t - tau), 0)], LP[min(v(t - tau), 0)].
+// Position-dependent (quadratic) stiffness: (x - x_ref)^2.
+// Sensor offset drift: t - t_mid.
+// Coulomb-like friction: sign(v).
+// Inertia different from the configured one (only when the baseline fixes it): acceleration.
+
+[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> standard_library();
+
+// The reflex's second-order low pass omega^2 / (s^2 + 2 zeta omega s + omega^2),
+// bilinear transform prewarped at fn (unit DC gain), as one scipy-layout section.
+[[nodiscard]] std::array<double, 6> reflex_lowpass_sos(double fn_hz, double zeta, double dt_s);
+
+}  // namespace manip::diagnosis

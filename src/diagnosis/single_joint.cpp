@@ -1,0 +1,213 @@
+#include "manip/diagnosis/single_joint.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string_view>
+
+#include "manip/common/errors.hpp"
+#include "manip/dsp/savgol.hpp"
+
+namespace manip::diagnosis {
+namespace {
+
+std::string trim(std::string_view s) {
+  const auto b = s.find_first_not_of(" \t\r");
+  if (b == std::string_view::npos) return {};
+  const auto e = s.find_last_not_of(" \t\r");
+  return std::string(s.substr(b, e - b + 1));
+}
+
+std::vector<std::string> split_fields(const std::string& line) {
+  std::vector<std::string> out;
+  std::string cur;
+  std::istringstream is(line);
+  while (std::getline(is, cur, ',')) out.push_back(trim(cur));
+  if (!line.empty() && line.back() == ',') out.emplace_back();
+  return out;
+}
+
+bool parse_double(const std::string& s, double& v) {
+  if (s.empty()) return false;
+  const char* b = s.data();
+  const char* e = s.data() + s.size();
+  if (*b == '+') ++b;
+  auto [ptr, ec] = std::from_chars(b, e, v);
+  return ec == std::errc() && ptr == e && std::isfinite(v);
+}
+
+}  // namespace
+
+SingleJointRecord read_single_joint_csv(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot open (" + std::string(std::strerror(errno)) + ")");
+  SingleJointRecord rec;
+  rec.source = path;
+  double dt_header = 0.0;
+  bool have_dt_header = false;
+  int col_t = -1, col_p = -1, col_q = -1, ncols = -1;
+  std::vector<double> time;
+  std::string line;
+  int lineno = 0;
+  auto fail = [&](const std::string& why) { throw InputError(path + ":" + std::to_string(lineno) + ": " + why); };
+  while (std::getline(in, line)) {
+    ++lineno;
+    const std::string t = trim(line);
+    if (t.empty()) fail("empty line (remove it)");
+    if (t[0] == '#') {
+      const auto k = t.find("dt=");
+      if (k != std::string::npos) {
+        if (have_dt_header) fail("second \"dt=\"");
+        std::size_t e = k + 3;
+        while (e < t.size() && t[e] != ';' && t[e] != ' ' && t[e] != ',') ++e;
+        if (!parse_double(t.substr(k + 3, e - k - 3), dt_header) || !(dt_header > 0.0))
+          fail("\"dt=\" must be a positive number of seconds (got \"" + t.substr(k + 3, e - k - 3) + "\")");
+        have_dt_header = true;
+      }
+      continue;
+    }
+    const auto f = split_fields(t);
+    if (ncols < 0) {
+      double probe = 0.0;
+      if (!parse_double(f[0], probe)) {  // column-header line
+        ncols = static_cast<int>(f.size());
+        for (int i = 0; i < ncols; ++i) {
+          const auto& name = f[static_cast<std::size_t>(i)];
+          int* slot = name == "time_s" ? &col_t : name == "pos_rad" ? &col_p : name == "torque_nm" ? &col_q : nullptr;
+          if (!slot) fail("unknown column \"" + name + "\" (expected time_s, pos_rad, torque_nm)");
+          if (*slot >= 0) fail("column \"" + name + "\" given twice");
+          *slot = i;
+        }
+        if (col_p < 0 || col_q < 0) fail("header must name pos_rad and torque_nm");
+        continue;
+      }
+      ncols = static_cast<int>(f.size());
+      if (ncols == 2) {
+        col_p = 0;
+        col_q = 1;
+      } else if (ncols == 3) {
+        col_t = 0;
+        col_p = 1;
+        col_q = 2;
+      } else {
+        fail("expected 2 columns (pos_rad, torque_nm) or 3 (time_s, pos_rad, torque_nm), got " +
+             std::to_string(ncols));
+      }
+    }
+    if (static_cast<int>(f.size()) != ncols)
+      fail("expected " + std::to_string(ncols) + " fields, got " + std::to_string(f.size()));
+    double v[3] = {0, 0, 0};
+    for (int i = 0; i < ncols; ++i)
+      if (!parse_double(f[static_cast<std::size_t>(i)], v[i]))
+        fail("field " + std::to_string(i + 1) + " is not a finite number (\"" + f[static_cast<std::size_t>(i)] + "\")");
+    if (col_t >= 0) time.push_back(v[col_t]);
+    rec.pos_rad.push_back(v[col_p]);
+    rec.torque_nm.push_back(v[col_q]);
+  }
+  if (rec.pos_rad.size() < 2) throw InputError(path + ": no data rows (need position and torque samples)");
+  if (col_t >= 0) {
+    const double dt = (time.back() - time.front()) / static_cast<double>(time.size() - 1);
+    if (!(dt > 0.0)) throw InputError(path + ": time_s does not increase");
+    for (std::size_t i = 1; i < time.size(); ++i)
+      if (std::fabs(time[i] - time[i - 1] - dt) > 1e-3 * dt) {
+        lineno = 0;
+        throw InputError(path + ": time_s not uniformly sampled near sample " + std::to_string(i) +
+                         " (step " + std::to_string(time[i] - time[i - 1]) + " s, mean " + std::to_string(dt) + " s)");
+      }
+    if (have_dt_header && std::fabs(dt - dt_header) > 1e-3 * dt_header)
+      throw InputError(path + ": time_s spacing " + std::to_string(dt) + " s disagrees with dt=" +
+                       std::to_string(dt_header));
+    rec.dt_s = dt;
+  } else {
+    if (!have_dt_header) throw InputError(path + ": no time_s column and no \"# dt=<seconds>\" line: sample period unknown");
+    rec.dt_s = dt_header;
+  }
+  return rec;
+}
+
+SingleJointPrepared prepare_single_joint(const SingleJointRecord& rec, const SingleJointOptions& opt) {
+  SingleJointPrepared out;
+  const double fs = 1.0 / rec.dt_s;
+  const double fc = std::min(opt.cutoff_hz, fs / 8.0);
+  out.window = dsp::savgol_window_for_cutoff(fs, fc, opt.polyorder);
+  out.cutoff_hz = dsp::savgol_cutoff_hz(out.window, opt.polyorder, fs);
+  const std::size_t n = rec.pos_rad.size();
+  if (n < static_cast<std::size_t>(4 * out.window))
+    throw InputError(rec.source + ": " + std::to_string(n) + " samples are too few (need several Savitzky-Golay windows of " +
+                     std::to_string(out.window) + ")");
+  auto smooth = std::make_shared<dsp::SavgolFilter>(out.window, opt.polyorder, 0, rec.dt_s);
+  dsp::SavgolFilter d1(out.window, opt.polyorder, 1, rec.dt_s);
+  dsp::SavgolFilter d2(out.window, opt.polyorder, 2, rec.dt_s);
+  Segment s;
+  s.pos.resize(n);
+  s.vel.resize(n);
+  s.acc.resize(n);
+  s.y.resize(n);
+  s.pos_raw = rec.pos_rad;
+  smooth->apply(rec.pos_rad, s.pos);
+  d1.apply(rec.pos_rad, s.vel);
+  d2.apply(rec.pos_rad, s.acc);
+  smooth->apply(rec.torque_nm, s.y);
+  // Edges: mode='interp' fits one polynomial to the first/last window; keep
+  // only samples whose window lies inside the record.
+  s.first = static_cast<std::size_t>(out.window / 2);
+  s.last = n - static_cast<std::size_t>(out.window / 2);
+  s.t0_s = 0.0;
+  Dataset& d = out.data;
+  d.source = rec.source;
+  d.dt_s = rec.dt_s;
+  d.smoother = smooth;
+  d.smoothing_cutoff_hz = out.cutoff_hz;
+  d.target_name = "torque";
+  d.target_unit = "N m";
+  d.kin_unit = "rad";
+  d.inertia_fixed = opt.inertia_fixed;
+  d.fixed_inertia = opt.fixed_inertia_kgm2;
+  const double pos_mean = [&] {
+    double m = 0.0;
+    for (std::size_t i = s.first; i < s.last; ++i) m += s.pos[i];
+    return m / static_cast<double>(s.last - s.first);
+  }();
+  d.pos_ref = pos_mean;
+  std::vector<double> pc(n);
+  for (std::size_t i = 0; i < n; ++i) pc[i] = s.pos[i] - pos_mean;
+  // Torque sign (see SingleJointOptions::torque_sign): decided on the free
+  // four-term fit so that it does not depend on a fixed inertia.
+  out.torque_sign = opt.torque_sign == 0 ? 1 : opt.torque_sign;
+  if (opt.torque_sign == 0) {
+    Eigen::Matrix4d G = Eigen::Matrix4d::Zero();
+    Eigen::Vector4d h = Eigen::Vector4d::Zero();
+    for (std::size_t i = s.first; i < s.last; ++i) {
+      const Eigen::Vector4d x(s.acc[i], s.vel[i], pc[i], 1.0);
+      G += x * x.transpose();
+      h += x * s.y[i];
+    }
+    const Eigen::Vector4d th = G.completeOrthogonalDecomposition().solve(h);
+    if (th(2) < 0.0) {
+      out.torque_sign = -1;
+      out.sign_flipped_automatically = true;
+    }
+  }
+  for (auto& v : s.y) v *= out.torque_sign;
+  if (opt.inertia_fixed) {
+    for (std::size_t i = 0; i < n; ++i) s.y[i] -= opt.fixed_inertia_kgm2 * s.acc[i];
+  } else {
+    d.base_names.push_back("I");
+    d.base_units.push_back("kg m^2");
+    s.base.push_back(s.acc);
+  }
+  d.base_names.insert(d.base_names.end(), {"B", "K", "c"});
+  d.base_units.insert(d.base_units.end(), {"N m s/rad", "N m/rad", "N m"});
+  s.base.push_back(s.vel);
+  s.base.push_back(pc);
+  s.base.emplace_back(n, 1.0);
+  d.segments.push_back(std::move(s));
+  return out;
+}
+
+}  // namespace manip::diagnosis

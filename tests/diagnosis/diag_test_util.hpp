@@ -1,0 +1,43 @@
+#pragma once
+// Shared by the diagnosis tests: a synthetic record goes through the CSV file
+// and the front end, exactly like a lab's record (the diagnosis never sees
+// the generator's settings).
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "manip/diagnosis/engine.hpp"
+#include "manip/diagnosis/single_joint.hpp"
+#include "manip/diagnosis/synthetic.hpp"
+
+namespace manip::diagnosis::test {
+
+inline std::string tmp_path(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / ("manip_diag_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  return (dir / name).string();
+}
+
+struct Run {
+  synthetic::Truth truth;
+  Diagnosis diag;
+};
+
+inline Run run_synthetic(const synthetic::Options& o, int bootstrap = 50) {
+  const auto g = synthetic::generate(o);
+  const std::string path = tmp_path(std::string(synthetic::name(o.hidden)) + "_" + std::to_string(o.seed) + ".csv");
+  synthetic::write_csv(g.record, path, o.seed % 2 == 0);
+  const auto rec = read_single_joint_csv(path);
+  std::filesystem::remove(path);
+  const auto prep = prepare_single_joint(rec);
+  EngineOptions eo;
+  eo.bootstrap = bootstrap;
+  return {g.truth, diagnose(prep.data, standard_library(), eo)};
+}
+
+inline double rel_err(double est, double truth) { return std::fabs(est - truth) / std::fabs(truth); }
+
+}  // namespace manip::diagnosis::test

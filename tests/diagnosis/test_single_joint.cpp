@@ -1,0 +1,117 @@
+// The single-joint front end: CSV layout and its errors, the baseline's
+// least squares and the reflex low pass against analytic solutions.
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <complex>
+#include <fstream>
+#include <numbers>
+
+#include "diag_test_util.hpp"
+#include "manip/common/errors.hpp"
+#include "manip/diagnosis/mechanisms.hpp"
+
+using namespace manip::diagnosis;
+
+namespace {
+std::string write(const std::string& name, const std::string& text) {
+  const auto p = test::tmp_path(name);
+  std::ofstream(p) << text;
+  return p;
+}
+std::string error_of(const std::string& path) {
+  try {
+    (void)read_single_joint_csv(path);
+  } catch (const manip::InputError& e) {
+    CHECK(e.exit_code() == manip::exit_code::kInput);
+    return e.what();
+  }
+  return "no error";
+}
+}  // namespace
+
+TEST_CASE("CSV layouts: dt header with two columns, time column, named header", "[diagnosis][csv]") {
+  const auto a = read_single_joint_csv(write("a.csv", "# dt=0.001; channels=['pos1', 'tq1']\n0.07,-2.7\n0.08,-2.6\n0.09,-2.5\n"));
+  CHECK(a.dt_s == 0.001);
+  REQUIRE(a.pos_rad.size() == 3);
+  CHECK(a.pos_rad[1] == 0.08);
+  CHECK(a.torque_nm[2] == -2.5);
+  const auto b = read_single_joint_csv(write("b.csv", "0.000,1,2\n0.002,3,4\n0.004,5,6\n"));
+  CHECK(b.dt_s == Approx(0.002));
+  CHECK(b.torque_nm[1] == 4.0);
+  const auto c = read_single_joint_csv(write("c.csv", "# lab X\ntorque_nm, time_s, pos_rad\n7,0.0,1\n8,0.01,2\n"));
+  CHECK(c.dt_s == Approx(0.01));
+  CHECK(c.pos_rad[1] == 2.0);
+  CHECK(c.torque_nm[0] == 7.0);
+}
+
+TEST_CASE("CSV errors name the file and the line", "[diagnosis][csv]") {
+  const auto p1 = write("e1.csv", "# dt=0.001\n0.1,0.2\n0.1,abc\n");
+  CHECK(error_of(p1) == p1 + ":3: field 2 is not a finite number (\"abc\")");
+  const auto p2 = write("e2.csv", "# dt=0.001\n0.1,0.2\n0.1,0.2,0.3\n");
+  CHECK(error_of(p2) == p2 + ":3: expected 2 fields, got 3");
+  const auto p3 = write("e3.csv", "0.1,0.2\n0.1,0.2\n");
+  CHECK(error_of(p3).find("sample period unknown") != std::string::npos);
+  const auto p4 = write("e4.csv", "# dt=-1\n0.1,0.2\n");
+  CHECK(error_of(p4).rfind(p4 + ":1: ", 0) == 0);
+  const auto p5 = write("e5.csv", "0.0,1,2\n0.001,1,2\n0.003,1,2\n");
+  CHECK(error_of(p5).find("not uniformly sampled") != std::string::npos);
+  const auto p6 = write("e6.csv", "time_s,angle,torque_nm\n");
+  CHECK(error_of(p6) == p6 + ":1: unknown column \"angle\" (expected time_s, pos_rad, torque_nm)");
+  const auto p7 = write("e7.csv", "# dt=0.001\n0.1,nan\n");
+  CHECK(error_of(p7) == p7 + ":2: field 2 is not a finite number (\"nan\")");
+  CHECK(error_of(test::tmp_path("missing.csv")).find("cannot open") != std::string::npos);
+}
+
+TEST_CASE("baseline least squares recovers I, B, K, c of a noise-free record exactly", "[diagnosis][baseline]") {
+  // x = sum of sines (analytic derivatives); torque = I x'' + B x' + K (x - mean) + c
+  // recorded as the reaction (negated): the front end must flip it back.
+  SingleJointRecord r;
+  r.source = "analytic";
+  r.dt_s = 0.001;
+  const double I = 0.02, B = 0.9, K = 150.0, c = 3.0;
+  const int n = 20000;
+  std::vector<double> x(n), xd(n), xdd(n);
+  double xm = 0;
+  for (int i = 0; i < n; ++i) {
+    const double t = i * r.dt_s;
+    x[static_cast<std::size_t>(i)] = 0.02 * std::sin(2 * std::numbers::pi * 1.3 * t) + 0.01 * std::sin(2 * std::numbers::pi * 4.1 * t + 1.0);
+    xd[static_cast<std::size_t>(i)] = 0.02 * 2 * std::numbers::pi * 1.3 * std::cos(2 * std::numbers::pi * 1.3 * t) +
+                                      0.01 * 2 * std::numbers::pi * 4.1 * std::cos(2 * std::numbers::pi * 4.1 * t + 1.0);
+    xdd[static_cast<std::size_t>(i)] = -0.02 * std::pow(2 * std::numbers::pi * 1.3, 2) * std::sin(2 * std::numbers::pi * 1.3 * t) -
+                                       0.01 * std::pow(2 * std::numbers::pi * 4.1, 2) * std::sin(2 * std::numbers::pi * 4.1 * t + 1.0);
+    xm += x[static_cast<std::size_t>(i)];
+  }
+  r.pos_rad = x;
+  r.torque_nm.resize(n);
+  const auto prep0 = prepare_single_joint(r);  // to learn x_ref (mean over the usable range)
+  const double ref = prep0.data.pos_ref;
+  for (std::size_t i = 0; i < x.size(); ++i) r.torque_nm[i] = -(I * xdd[i] + B * xd[i] + K * (x[i] - ref) + c);
+  const auto prep = prepare_single_joint(r);
+  CHECK(prep.torque_sign == -1);
+  CHECK(prep.sign_flipped_automatically);
+  const auto f = fit_full(prep.data, {});
+  // Not bit-exact: the order-5 Savitzky-Golay derivatives of a sine differ from
+  // the smoothed true derivatives by ~1e-4 (relative) at 4 Hz with a 43-sample
+  // window; the elastic term, from deriv 0, is far more exact.
+  CHECK(f.theta(0) == Approx(I).epsilon(5e-4));
+  CHECK(f.theta(1) == Approx(B).epsilon(5e-4));
+  CHECK(f.theta(2) == Approx(K).epsilon(1e-5));
+  CHECK(f.theta(3) == Approx(c).epsilon(1e-5));
+  CHECK(f.sse < 1e-6 * f.sst);
+  // The Savitzky-Golay window comes from the cut-off: nearest -3 dB point to 40 Hz at 1 kHz.
+  CHECK(prep.cutoff_hz == Approx(40.0).margin(1.0));
+}
+
+TEST_CASE("reflex low pass: unit DC gain and |H(fn)| = 1 / (2 zeta) (prewarped bilinear)", "[diagnosis][mechanisms]") {
+  for (double fn : {1.0, 4.0, 20.0})
+    for (double z : {0.5, 0.75, 1.0}) {
+      const auto c = reflex_lowpass_sos(fn, z, 0.001);
+      auto H = [&](double f) {
+        const std::complex<double> zi = std::exp(std::complex<double>(0, -2 * std::numbers::pi * f * 0.001));
+        return (c[0] + c[1] * zi + c[2] * zi * zi) / (c[3] + c[4] * zi + c[5] * zi * zi);
+      };
+      // (b0 + b1 + b2) / (1 + a1 + a2) cancels ~1e-6-sized sums at fn = 1 Hz, fs = 1 kHz
+      CHECK(std::abs(H(0.0)) == Approx(1.0).epsilon(1e-8));
+      CHECK(std::abs(H(fn)) == Approx(1.0 / (2.0 * z)).epsilon(1e-9));
+    }
+}
