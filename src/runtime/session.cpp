@@ -26,9 +26,12 @@ using namespace std::chrono_literals;
 class QueueBackpressure final : public Backpressure {
  public:
   QueueBackpressure(const RecordQueue* log, std::size_t log_cap, const RecordQueue* bus,
-                    std::size_t bus_cap)
-      : log_(log), bus_(bus), log_cap_(log_cap), bus_cap_(bus_cap) {}
+                    std::size_t bus_cap, const std::atomic<bool>* give_up)
+      : log_(log), bus_(bus), log_cap_(log_cap), bus_cap_(bus_cap), give_up_(give_up) {}
   bool must_wait() const override {
+    // A helper thread that died no longer drains its queue: waiting for it
+    // would keep the loop from ever reaching the orderly stop it requested.
+    if (give_up_->load(std::memory_order_relaxed)) return false;
     // Leave room for one cycle's worth of records (state + events + command results).
     constexpr std::size_t kMargin = 64;
     if (log_ && log_->size_approx() + kMargin >= log_cap_) return true;
@@ -40,6 +43,7 @@ class QueueBackpressure final : public Backpressure {
   const RecordQueue* log_;
   const RecordQueue* bus_;
   std::size_t log_cap_, bus_cap_;
+  const std::atomic<bool>* give_up_;
 };
 
 }  // namespace
@@ -150,6 +154,7 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
   std::promise<bool> go_promise;
   std::shared_future<bool> go = go_promise.get_future().share();
   std::atomic<bool> loop_done{false};
+  std::atomic<bool> helper_failed{false};  // a helper thread ended by an exception
   std::thread loop_thread([&] {
     std::string err;
     if (opt.realtime) {
@@ -171,7 +176,7 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
             cfg.loop.log_queue_capacity,
             static_cast<std::size_t>(std::max<long long>(cfg.logger.flush_every_cycles, 0)) + 64 + 64);
         QueueBackpressure bp(want_log ? &log_q : nullptr, log_limit, want_bus ? &bus_q : nullptr,
-                             cfg.loop.bus_queue_capacity);
+                             cfg.loop.bus_queue_capacity, &helper_failed);
         rep.cycles = run_as_fast_as_possible(body, timing, &bp);
       }
     }
@@ -264,6 +269,7 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
       if (internal_error.empty()) internal_error = std::string(where) + ": " + what;
     } catch (...) {
     }
+    helper_failed.store(true, std::memory_order_relaxed);
     ctl.request_stop(StopReason::kRequested);
   };
   auto guarded = [&](const char* where, auto&& fn) noexcept {
