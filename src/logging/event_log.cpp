@@ -81,8 +81,10 @@ const std::uint8_t* EventLogReader::view(std::uint64_t off, std::size_t n) {
   if (buf_.size() < n || buf_.empty()) {
     // Free the old buffer before allocating the new one, so the peak is the
     // new size only (the bound stated in the header).
+    // Never more than the file itself holds.
     buf_ = {};
-    buf_.resize(std::max(kMinBufferBytes, n + kReadAheadBytes));
+    buf_.resize(static_cast<std::size_t>(
+        std::min<std::uint64_t>(std::max(kMinBufferBytes, n + kReadAheadBytes), std::max<std::uint64_t>(file_size_, n))));
   }
   const std::size_t want = static_cast<std::size_t>(std::min<std::uint64_t>(buf_.size(), file_size_ - off));
   win_off_ = off;

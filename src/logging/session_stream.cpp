@@ -89,12 +89,13 @@ LogReadSummary read_log(const std::string& path, SessionHandler& handler) {
                        "); skipped");
     return false;
   };
-  // Handlers (e.g. the trial assembler) throw on input they cannot use at all;
-  // say where in which file that happened.
+  // Handlers (e.g. the trial assembler) throw std::runtime_error on input they
+  // cannot use at all; say where in which file that happened. Other
+  // exceptions are bugs, not bad input, and pass through unchanged.
   auto call = [&](auto&& fn) {
     try {
       fn();
-    } catch (const std::exception& e) {
+    } catch (const std::runtime_error& e) {
       const std::string what = e.what();
       if (what.rfind(path, 0) == 0) throw;  // already names the file
       std::string msg = where(path, ev) + ": " + what;

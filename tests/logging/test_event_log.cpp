@@ -97,7 +97,8 @@ TEST_CASE("event log: garbage in the middle is skipped, reported with its offset
 
 TEST_CASE("event log: a truncated last event is reported and everything before it is read") {
   auto bytes = slurp(good_log());
-  bytes.resize(bytes.size() - 50);
+  // erase, not resize: GCC 12 -O3 + ASan warns (falsely) that resize may memset 2^64 bytes.
+  bytes.erase(bytes.end() - 50, bytes.end());
   const auto dir = testutil::temp_dir("trunc");
   spit(dir + "/t.lcm", bytes);
   Counter good, cut;

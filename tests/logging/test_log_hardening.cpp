@@ -437,3 +437,21 @@ TEST_CASE("safe_decode: bad string lengths and array counts are refused before t
     CHECK(ok < 20000);  // corrupting the doubles still decodes; the point is that nothing threw
   }
 }
+
+TEST_CASE("log hardening: zeros after the last event (a preallocated file) are skipped garbage, not a truncated event") {
+  Bytes bad = slurp(good_log());
+  const auto evs = index_events(bad);
+  const std::size_t size = bad.size();
+  bad.resize(size + 4096, 0);
+  const auto dir = testutil::temp_dir("zeros");
+  spit(dir + "/z.lcm", bad);
+  Seen seen;
+  const auto sum = logging::read_log(dir + "/z.lcm", seen);
+  CHECK(seen.msgs == expected_without({}));
+  CHECK_FALSE(sum.diagnostics.truncated_tail);
+  REQUIRE(sum.diagnostics.skipped.size() == 1);
+  CHECK(sum.diagnostics.skipped[0].offset == size);
+  CHECK(sum.diagnostics.skipped[0].bytes == 4096);
+  CHECK(any_warning_with(seen.warnings, dir + "/z.lcm", "skipped 4096 bytes at byte " + std::to_string(size)));
+  CHECK(evs.back().off + evs.back().total == size);
+}

@@ -63,9 +63,10 @@ struct ReadDiagnostics {
 // only when no valid event follows it anywhere in the file.
 //
 // Allocation bound: the read buffer is the only allocation that grows with
-// the input. It holds max(kMinBufferBytes, E + kReadAheadBytes) bytes, where
-// E is the size of the largest event accepted so far (E <= kEventHeaderBytes
-// + kMaxChannelBytes + kMaxDataBytes, and E <= the file size). A declared
+// the input. It holds min(file size, max(kMinBufferBytes, E + kReadAheadBytes))
+// bytes, where E is the size of the largest event accepted so far
+// (E <= kEventHeaderBytes + kMaxChannelBytes + kMaxDataBytes, and E <= the
+// file size); the old buffer is freed before a larger one is allocated. A declared
 // length is never allocated before the event passed the framing checks,
 // which read only the 28-byte header, the channel and the next header.
 // buffer_bytes() reports the buffer's size (it never shrinks, so it is the

@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer harnesses of fuzz/ with clang (a separate build in
+# build-fuzz/, the normal GCC build is untouched) and runs each for a bounded
+# time. Fails (exit 1) if any harness finds a crash, sanitizer report, leak,
+# timeout or out-of-memory; the reproducer is left in build-fuzz/artifacts/.
+#
+#   scripts/fuzz.sh [seconds per harness, default 60] [harness ...]
+#
+# Harnesses are fuzz/fuzz_<name>.cpp (all of them unless named); seeds are
+# read from fuzz/corpus/<name>/ (never written: the growing corpus lives in
+# build-fuzz/corpus/<name>/). Prints executions and coverage per harness.
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+secs=${1:-60}
+shift || true
+build=${MANIP_FUZZ_BUILD:-$root/build-fuzz}
+jobs=${MANIP_FUZZ_JOBS:-2}
+
+launcher=()
+if command -v ccache >/dev/null; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+mkdir -p "$build"
+cmake -S "$root/fuzz" -B "$build" -G Ninja -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
+  "${launcher[@]}" >"$build/cmake.log" 2>&1 || { cat "$build/cmake.log"; exit 1; }
+ninja -C "$build" -j"$jobs"
+
+names=("$@")
+if [ ${#names[@]} -eq 0 ]; then
+  for f in "$root"/fuzz/fuzz_*.cpp; do n=$(basename "$f" .cpp); names+=("${n#fuzz_}"); done
+fi
+
+status=0
+summary=()
+for n in "${names[@]}"; do
+  bin="$build/fuzz_$n"
+  [ -x "$bin" ] || { echo "fuzz.sh: no harness fuzz_$n" >&2; exit 1; }
+  work="$build/corpus/$n"
+  art="$build/artifacts/$n/"
+  mkdir -p "$work" "$art"
+  seeds=()
+  [ -d "$root/fuzz/corpus/$n" ] && seeds=("$root/fuzz/corpus/$n")
+  log="$build/fuzz_$n.log"
+  echo "== fuzz_$n: ${secs}s (log: $log)"
+  set +e
+  "$bin" -max_total_time="$secs" -rss_limit_mb=512 -timeout=10 -print_final_stats=1 \
+    -artifact_prefix="$art" "$work" "${seeds[@]}" >"$log" 2>&1
+  rc=$?
+  set -e
+  execs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -o '[0-9]*$' | tail -1)
+  rate=$(grep -oE 'stat::average_exec_per_sec: *[0-9]+' "$log" | grep -o '[0-9]*$' | tail -1)
+  last=$(grep -E '^#[0-9]+' "$log" | tail -1)
+  cov=$(echo "$last" | grep -o 'cov: [0-9]*' | grep -o '[0-9]*')
+  ft=$(echo "$last" | grep -o 'ft: [0-9]*' | grep -o '[0-9]*')
+  corp=$(echo "$last" | grep -o 'corp: [0-9]*/[0-9]*[a-zA-Z]*' | cut -d' ' -f2)
+  if [ $rc -eq 0 ]; then result=ok; else
+    result="FAILED (exit $rc)"
+    status=1
+    grep -E 'ERROR|SUMMARY|invariant broken|Test unit written|deadly signal|Timeout|out-of-memory|leak' "$log" | head -20 >&2 || true
+  fi
+  summary+=("fuzz_$n: ${execs:-?} executions (${rate:-?}/s), coverage ${cov:-?} edges, ${ft:-?} features, corpus ${corp:-?}: $result")
+done
+echo "== summary (${secs}s per harness)"
+printf '%s\n' "${summary[@]}"
+exit $status
