@@ -3,6 +3,7 @@
 // logging::safe_decode -> validate_command -> the loop's command queue).
 // Must never crash, throw, hang or leak; every input is either queued for the
 // loop or answered with a status whose reason names the rejection.
+// manip-fuzz-sources: src/runtime/bus.cpp src/runtime/config.cpp src/runtime/messages.cpp src/runtime/rt_thread.cpp src/runtime/timing.cpp src/control/*.cpp src/schema/*.cpp src/logging/*.cpp src/common/*.cpp src/model/*.cpp src/sim/*.cpp
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>

@@ -1,6 +1,7 @@
 // libFuzzer harness: bytes as rt.yaml text -> runtime::parse_rt_config. A bad
 // file must end in manip::ConfigError (exit 3, "file:line: key: reason"),
 // never in a crash, a hang, another exception type or a leak.
+// manip-fuzz-sources: src/runtime/config.cpp src/control/*.cpp src/schema/*.cpp src/common/*.cpp src/model/*.cpp src/sim/*.cpp
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
