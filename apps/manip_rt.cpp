@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 
 #include <csignal>
+#include <cmath>
 #include <ctime>
 #include <iostream>
 
@@ -14,7 +15,29 @@
 
 namespace {
 std::atomic<bool> g_interrupt{false};
-extern "C" void on_signal(int) { g_interrupt.store(true); }
+std::atomic<int> g_signal{0};
+extern "C" void on_signal(int sig) {
+  int expected = 0;
+  g_signal.compare_exchange_strong(expected, sig);  // the first signal names the reason
+  g_interrupt.store(true);
+}
+
+// SIGINT, SIGTERM and SIGHUP (closed terminal, dropped ssh session) all mean
+// "stop safely": safe law, STOPPED cycles, log closed, summary, exit 130.
+// SIGPIPE is ignored: a closed stdout/stderr (`manip_rt ... 2>&1 | head -1`)
+// makes writes fail with EPIPE instead of killing the controller; progress
+// and summary output then stop, the session and its log do not.
+void install_signal_handlers() {
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = SA_RESTART;
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
+  struct sigaction ign {};
+  ign.sa_handler = SIG_IGN;
+  sigemptyset(&ign.sa_mask);
+  sigaction(SIGPIPE, &ign, nullptr);
+}
 
 // The rows of common/exit_codes.hpp that manip_rt uses.
 const char* kExitCodes =
@@ -22,17 +45,20 @@ const char* kExitCodes =
     "  0    session complete, stopped by STOP_SESSION, or --duration reached\n"
     "  2    bad command line\n"
     "  3    configuration invalid or unreadable (message names file, line, key, reason)\n"
-    "  6    log file exists (use --force), cannot be created, or writing failed (e.g. disk full)\n"
-    "  7    session ended by a safety fault (unattended runs, --exit-on-fault)\n"
+    "  6    log file exists (use --force), in use by another running manip_rt, cannot be created,\n"
+    "       or writing failed (e.g. disk full)\n"
+    "  7    session ended by a safety fault (unattended runs, --exit-on-fault), or reached\n"
+    "       --duration or its end with a fault still latched\n"
     "  8    backend unavailable or failed to start (--backend can: not implemented yet)\n"
     "  9    --require-rt: no PREEMPT_RT kernel, no real-time privileges, or the loop thread\n"
     "       could not get SCHED_FIFO/mlock (checked before the first cycle)\n"
     "  10   LCM bus cannot be created with the URL (--lcm-url none runs without it)\n"
     "  70   unexpected internal error (a bug: please report it)\n"
-    "  130  interrupted (SIGINT/SIGTERM): stopped safely, log closed\n";
+    "  130  interrupted (SIGINT, SIGTERM or SIGHUP): stopped safely, log closed\n";
 }  // namespace
 
 int main(int argc, char** argv) {
+  install_signal_handlers();  // before the first write to stderr (SIGPIPE)
   namespace rt = manip::runtime;
   namespace ec = manip::exit_code;
   CLI::App app{std::string("manip_rt ") + manip::kVersion +
@@ -53,7 +79,21 @@ int main(int argc, char** argv) {
   app.add_flag("--require-rt", require_rt, "refuse to run without a PREEMPT_RT kernel and real-time privileges");
   app.add_option("--lcm-url", lcm_url, "LCM URL for the live bus (default: bus.lcm_url; 'none' = no bus)");
   app.add_option("--duration", duration, "stop after this many seconds of loop time (0 = whole session)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Validator(
+          [](std::string& v) -> std::string {
+            // CLI::NonNegativeNumber lets "nan" through (NaN < 0 is false).
+            double d = 0.0;
+            std::size_t used = 0;
+            try {
+              d = std::stod(v, &used);
+            } catch (const std::exception&) {
+              return "not a number: '" + v + "'";
+            }
+            if (used != v.size() || !std::isfinite(d) || d < 0.0)
+              return "must be a finite number of seconds >= 0 (got '" + v + "')";
+            return {};
+          },
+          "SECONDS >= 0"));
   app.add_option("--trials", trials, "shorten the session to N movements (keeps the perturbed fraction)")
       ->check(CLI::PositiveNumber);
   app.add_option("--seed", seed, "override protocol.seed (recorded in the session message)")
@@ -86,8 +126,6 @@ int main(int argc, char** argv) {
       log = "manip_rt-" + cfg.session.session_id + "-" + ts + ".lcm";
     }
 
-    std::signal(SIGINT, on_signal);
-    std::signal(SIGTERM, on_signal);
     rt::RunOptions opt;
     opt.log_path = log;
     opt.overwrite_log = force;
@@ -98,6 +136,7 @@ int main(int argc, char** argv) {
     opt.exit_on_fault = exit_on_fault;
     opt.quiet = quiet;
     opt.interrupt = &g_interrupt;
+    opt.interrupt_signal = &g_signal;
     opt.source = "manip_rt/" + backend;
     if (!quiet)
       std::cerr << "manip_rt " << manip::kVersion << ": backend " << backend << ", "

@@ -2,10 +2,17 @@
 
 #include <lcm/lcm-cpp.hpp>
 
+#include <dirent.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <set>
 
 #include "manip/common/channels.hpp"
+#include "manip/logging/safe_decode.hpp"
 #include "manip/runtime/messages.hpp"
 #include "manip/runtime/rt_thread.hpp"
 
@@ -51,11 +58,20 @@ std::optional<manip::command_status_t> CommandGate::submit(const void* data, int
   st.mode = mode_now;
   st.accepted = false;
   manip::command_t c{};
-  if (size <= 0 || c.decode(data, 0, size) != size) {
+  // Untrusted bytes (LCM is unauthenticated multicast): the generated decode
+  // throws std::length_error on a string length of 0 (issue 9: one 45-byte
+  // packet aborted manip_rt). safe_decode walks the layout first and never
+  // throws; the answer names what is wrong and where.
+  const logging::DecodeResult dr =
+      size > 0 ? logging::safe_decode(data, static_cast<std::size_t>(size), c)
+               : logging::DecodeResult{logging::DecodeStatus::short_data, 0, size};
+  if (!dr) {
     ++rejected_;
     st.seq = -1;
     st.kind = 0;
     st.reason = reject_text(Reject::kUndecodable);
+    st.reason += ": ";
+    st.reason += size > 0 ? dr.message() : "empty payload";
     return st;
   }
   st.seq = c.seq;
@@ -111,7 +127,15 @@ void Bus::publish_session(const manip::session_t& s) { publish(channels::kSessio
 void Bus::publish_fault(const manip::fault_t& f) { publish(channels::kFault, f); }
 
 void Bus::c_on_command(const _lcm_recv_buf_t* rbuf, const char* /*channel*/, void* self) {
-  static_cast<Bus*>(self)->on_command(rbuf->data, static_cast<int>(rbuf->data_size));
+  // No exception may cross liblcm's C frames (that is std::terminate): a
+  // command that makes anything here throw (e.g. bad_alloc) is counted as
+  // rejected and the bus keeps serving.
+  auto* bus = static_cast<Bus*>(self);
+  try {
+    bus->on_command(rbuf->data, static_cast<int>(rbuf->data_size));
+  } catch (...) {
+    bus->handler_errors_.fetch_add(1, std::memory_order_relaxed);
+  }
 }
 
 void Bus::on_command(const void* data, int size) {
@@ -149,7 +173,7 @@ void Bus::publish_health() {
     h.fault_flags = static_cast<std::int32_t>(s.fault_flags.load(std::memory_order_relaxed));
     h.logger_drops = s.log_drops.load(std::memory_order_relaxed);
     h.publisher_drops = s.bus_drops.load(std::memory_order_relaxed);
-    h.command_rejects = s.commands_rejected.load(std::memory_order_relaxed) + gate_.rejected();
+    h.command_rejects = s.commands_rejected.load(std::memory_order_relaxed) + command_rejects();
   }
   if (links_.timing) {
     const TimingSnapshot t = links_.timing->snapshot();
@@ -164,8 +188,55 @@ void Bus::publish_health() {
   if (links_.to_logger) links_.to_logger->push_growing(AuxRecord(h));
 }
 
+std::int64_t udp_socket_drops() {
+  // Inodes of this process's sockets, then their drop counters in the
+  // (network-namespace-local) UDP table.
+  std::set<unsigned long> inodes;
+  if (DIR* d = ::opendir("/proc/self/fd")) {
+    while (const dirent* e = ::readdir(d)) {
+      char link[300], target[128];
+      std::snprintf(link, sizeof link, "/proc/self/fd/%s", e->d_name);
+      const ssize_t n = ::readlink(link, target, sizeof target - 1);
+      if (n <= 0) continue;
+      target[n] = '\0';
+      unsigned long ino = 0;
+      if (std::sscanf(target, "socket:[%lu]", &ino) == 1) inodes.insert(ino);
+    }
+    ::closedir(d);
+  }
+  std::int64_t drops = 0;
+  for (const char* table : {"/proc/self/net/udp", "/proc/self/net/udp6"}) {
+    std::FILE* f = std::fopen(table, "r");
+    if (!f) continue;
+    char line[512];
+    if (!std::fgets(line, sizeof line, f)) {  // header
+      std::fclose(f);
+      continue;
+    }
+    while (std::fgets(line, sizeof line, f)) {
+      // sl local rem st tx:rx tr:when retrnsmt uid timeout inode ref pointer drops
+      unsigned long ino = 0;
+      long long dr = 0;
+      char skip[8][64];
+      if (std::sscanf(line, " %63s %63s %63s %63s %63s %63s %63s %63s %*s %lu %*s %*s %lld", skip[0], skip[1],
+                      skip[2], skip[3], skip[4], skip[5], skip[6], skip[7], &ino, &dr) == 10 &&
+          inodes.count(ino))
+        drops += dr;
+    }
+    std::fclose(f);
+  }
+  return drops;
+}
+
 void Bus::poll(int timeout_ms) {
-  if (lcm_) lcm_->handleTimeout(timeout_ms);
+  if (lcm_) {
+    // lcm handles one message per call: under a flood, take what is queued
+    // (bounded, so live state and health still go out) instead of one per
+    // poll, or LCM's subscription queue and the socket buffer overflow and
+    // commands are lost unanswered.
+    int handled = lcm_->handleTimeout(timeout_ms) > 0 ? 1 : 0;
+    while (handled > 0 && handled < kMaxMessagesPerPoll && lcm_->handleTimeout(0) > 0) ++handled;
+  }
   drain_loop();
   const std::int64_t now = mono_ns();
   if (now >= next_health_ns_) {

@@ -186,6 +186,7 @@ RtConfig parse_node(const YAML::Node& root, const std::string& file) {
   {
     auto s = top.sub("logger");
     c.logger.flush_interval_s = s.positive("flush_interval_s");
+    if (s.has("flush_every_cycles")) c.logger.flush_every_cycles = s.integer("flush_every_cycles", 1, 100'000'000);
     s.finish();
   }
   {

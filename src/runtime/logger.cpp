@@ -5,6 +5,7 @@
 #include <thread>
 
 #include "manip/common/channels.hpp"
+#include "manip/common/errors.hpp"
 #include "manip/runtime/messages.hpp"
 #include "manip/runtime/rt_thread.hpp"
 
@@ -26,9 +27,20 @@ Logger::~Logger() {
   }
 }
 
-bool Logger::open(const std::string& path, const manip::session_t& session, std::string& err) {
+bool Logger::open(const std::string& path, const manip::session_t& session, std::string& err, bool force) {
+  // LockedOutput decides (O_EXCL, or force without truncation, then flock):
+  // no check-then-fopen race, and a second instance on the same path with
+  // --force is refused instead of truncating the first one's session. The
+  // writer then opens the (now empty, locked by us) file by name.
+  try {
+    lock_ = LockedOutput::open(path, force);
+  } catch (const Error& e) {
+    err = e.what();
+    return false;
+  }
   if (!w_.open(path)) {
     err = w_.error();
+    lock_.discard();
     return false;
   }
   open_ = true;
@@ -38,9 +50,17 @@ bool Logger::open(const std::string& path, const manip::session_t& session, std:
     fail(err);
     return false;
   }
-  stats_.events_in_file = w_.events_written();
+  stats_.events_in_file = events_flushed_ = w_.events_written();
   last_flush_ns_ = mono_ns();
   return true;
+}
+
+void Logger::discard() {
+  if (open_) {
+    w_.close();
+    open_ = false;
+  }
+  lock_.discard();
 }
 
 void Logger::fail(const std::string& why) {
@@ -96,6 +116,7 @@ void Logger::handle(const LoopRecord& r) {
     if (ring_fill_ < ring_.size()) ++ring_fill_;
     ++stats_.states;
     write(channels::kState, s->utime, *s);
+    if (flush_every_states_ > 0 && ++states_since_flush_ >= flush_every_states_) maybe_flush(true);
   } else if (const auto* e = std::get_if<TrialEventRecord>(&r)) {
     ++stats_.events;
     write(channels::kTrial, e->utime, to_message(*e));
@@ -107,20 +128,51 @@ void Logger::handle(const LoopRecord& r) {
     m.cycle = f->cycle;
     m.fault_flags = static_cast<std::int32_t>(f->fault_flags);
     m.reason = fault_reason(*f);
-    m.n_history = static_cast<std::int32_t>(ring_fill_);
+    // History: the last N states, but none already written in an earlier
+    // fault's history. Every state is in the log anyway; the history is a
+    // convenience copy, and an ESTOP/FAULT_RESET storm (a new latch every
+    // few cycles) must not multiply the log (issue 9: 30 000 pairs wrote
+    // 5 255 x 400 states, 350 MB in 25 s). Bound: each state at most once.
     m.history.reserve(ring_fill_);
     const std::size_t start = (ring_head_ + ring_.size() - ring_fill_) % ring_.size();
-    for (std::size_t i = 0; i < ring_fill_; ++i) m.history.push_back(ring_[(start + i) % ring_.size()]);
+    for (std::size_t i = 0; i < ring_fill_; ++i) {
+      const manip::state_t& st = ring_[(start + i) % ring_.size()];
+      if (st.cycle > history_until_cycle_) m.history.push_back(st);
+    }
+    m.n_history = static_cast<std::int32_t>(m.history.size());
+    if (!m.history.empty()) history_until_cycle_ = m.history.back().cycle;
+    stats_.fault_history_states += m.n_history;
     write(channels::kFault, f->utime, m);
-    if (print_faults_)
-      std::fprintf(stderr, "manip_rt: FAULT at cycle %lld: %s (latched: %s; %d cycles of history logged)\n",
-                   static_cast<long long>(f->cycle), m.reason.c_str(), fault_names(f->fault_flags).c_str(),
-                   m.n_history);
+    if (print_faults_) print_fault(m, f->fault_flags);
     if (fault_sink_) fault_sink_(m);
   } else if (const auto* c = std::get_if<CommandResultRecord>(&r)) {
     ++stats_.events;
     write(channels::kCommandStatus, c->utime, to_message(*c));
   }
+}
+
+void Logger::print_fault(const manip::fault_t& m, std::uint32_t flags) {
+  // At most kLinesPerWindow lines per second on stderr: a storm of faults
+  // must not flood the operator's terminal; the rest is summarised.
+  constexpr int kLinesPerWindow = 5;
+  constexpr std::int64_t kWindowNs = 1'000'000'000;
+  const std::int64_t now = mono_ns();
+  if (now - print_window_ns_ >= kWindowNs) {
+    if (suppressed_in_window_ > 0)
+      std::fprintf(stderr, "manip_rt: ... %lld more fault records like this (not printed; all are in the log)\n",
+                   static_cast<long long>(suppressed_in_window_));
+    print_window_ns_ = now;
+    printed_in_window_ = 0;
+    suppressed_in_window_ = 0;
+  }
+  if (printed_in_window_ >= kLinesPerWindow) {
+    ++suppressed_in_window_;
+    ++stats_.faults_not_printed;
+    return;
+  }
+  ++printed_in_window_;
+  std::fprintf(stderr, "manip_rt: FAULT at cycle %lld: %s (latched: %s; %d cycles of history logged)\n",
+               static_cast<long long>(m.cycle), m.reason.c_str(), fault_names(flags).c_str(), m.n_history);
 }
 
 void Logger::handle_aux(const AuxRecord& r) {
@@ -136,8 +188,18 @@ void Logger::maybe_flush(bool force) {
   const std::int64_t now = mono_ns();
   if (!force && static_cast<double>(now - last_flush_ns_) * 1e-9 < flush_interval_s_) return;
   last_flush_ns_ = now;
+  states_since_flush_ = 0;
   ++stats_.flushes;
-  if (!w_.flush()) fail(w_.error());
+  if (!w_.flush())
+    fail(w_.error());
+  else
+    events_flushed_ = w_.events_written();
+}
+
+std::int64_t Logger::events_on_disk() const {
+  // After a write failure, events still in the stdio buffer never reached the
+  // disk: count only what the last successful flush delivered.
+  return failed() ? events_flushed_ : w_.events_written();
 }
 
 std::size_t Logger::drain() {
@@ -156,7 +218,7 @@ std::size_t Logger::drain() {
     }
   }
   maybe_flush(false);
-  stats_.events_in_file = w_.events_written();
+  stats_.events_in_file = events_on_disk();
   publish_stats();
   return n;
 }
@@ -174,9 +236,17 @@ bool Logger::close(std::string& err) {
   drain();
   if (open_) {
     maybe_flush(true);
+    const bool failed_before = failed();
     if (!w_.close() && !failed()) fail(w_.error());
-    stats_.events_in_file = w_.events_written();
+    if (!failed_before && !failed()) events_flushed_ = w_.events_written();
+    stats_.events_in_file = events_on_disk();
     open_ = false;
+    lock_ = LockedOutput();  // the writer closed its stream; release the lock
+  }
+  if (suppressed_in_window_ > 0) {
+    std::fprintf(stderr, "manip_rt: ... %lld more fault records like this (not printed; all are in the log)\n",
+                 static_cast<long long>(suppressed_in_window_));
+    suppressed_in_window_ = 0;
   }
   publish_stats();
   if (failed()) {

@@ -1,6 +1,9 @@
 #include "manip/runtime/session.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <csignal>
+#include <mutex>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -23,9 +26,12 @@ using namespace std::chrono_literals;
 class QueueBackpressure final : public Backpressure {
  public:
   QueueBackpressure(const RecordQueue* log, std::size_t log_cap, const RecordQueue* bus,
-                    std::size_t bus_cap)
-      : log_(log), bus_(bus), log_cap_(log_cap), bus_cap_(bus_cap) {}
+                    std::size_t bus_cap, const std::atomic<bool>* give_up)
+      : log_(log), bus_(bus), log_cap_(log_cap), bus_cap_(bus_cap), give_up_(give_up) {}
   bool must_wait() const override {
+    // A helper thread that died no longer drains its queue: waiting for it
+    // would keep the loop from ever reaching the orderly stop it requested.
+    if (give_up_->load(std::memory_order_relaxed)) return false;
     // Leave room for one cycle's worth of records (state + events + command results).
     constexpr std::size_t kMargin = 64;
     if (log_ && log_->size_approx() + kMargin >= log_cap_) return true;
@@ -37,9 +43,19 @@ class QueueBackpressure final : public Backpressure {
   const RecordQueue* log_;
   const RecordQueue* bus_;
   std::size_t log_cap_, bus_cap_;
+  const std::atomic<bool>* give_up_;
 };
 
 }  // namespace
+
+const char* signal_name(int sig) {
+  switch (sig) {
+    case SIGINT: return "SIGINT";
+    case SIGTERM: return "SIGTERM";
+    case SIGHUP: return "SIGHUP";
+    default: return "a signal";
+  }
+}
 
 std::string RunReport::summary() const {
   std::ostringstream os;
@@ -50,12 +66,18 @@ std::string RunReport::summary() const {
      << " re-queued, " << trials.dropped << " dropped; " << trials.onsets << " perturbation onsets; "
      << remaining_slots << " schedule slots left\n";
   os << "  timing: " << timing.summary() << "\n";
-  os << "  queues: log drops " << log_drops << ", live-bus drops " << bus_drops << "; commands accepted "
-     << commands_accepted << ", rejected " << commands_rejected << "\n";
+  os << "  queues: log drops " << log_drops << ", live-bus drops " << bus_drops << "; commands received on the bus "
+     << commands_received << ", accepted " << commands_accepted << ", rejected " << commands_rejected;
+  if (bus_packets_dropped > 0)
+    os << "; " << bus_packets_dropped
+       << " LCM packets dropped by the kernel before manip_rt could read them (socket buffer full: a flood)";
+  os << "\n";
   os << "  log: " << log.states << " states (cycles " << log.first_cycle << ".." << log.last_cycle << "), "
      << log.missing_cycles << " missing cycles, " << log.events << " other events, " << log.faults
      << " fault records, " << log.events_in_file << " events in the file";
   if (log.discarded) os << ", " << log.discarded << " records discarded after the write failure";
+  if (log.fault_history_states) os << ", " << log.fault_history_states << " states in fault histories";
+  if (log.faults_not_printed) os << ", " << log.faults_not_printed << " fault lines not printed (rate limit)";
   os << "\n  faults latched at exit: " << control::fault_names(fault_flags) << "\n";
   return os.str();
 }
@@ -132,6 +154,7 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
   std::promise<bool> go_promise;
   std::shared_future<bool> go = go_promise.get_future().share();
   std::atomic<bool> loop_done{false};
+  std::atomic<bool> helper_failed{false};  // a helper thread ended by an exception
   std::thread loop_thread([&] {
     std::string err;
     if (opt.realtime) {
@@ -145,8 +168,15 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
                               cfg.loop.max_catch_up_cycles};
         rep.cycles = run_paced(body, po, timing);
       } else {
-        QueueBackpressure bp(want_log ? &log_q : nullptr, cfg.loop.log_queue_capacity, want_bus ? &bus_q : nullptr,
-                             cfg.loop.bus_queue_capacity);
+        // As fast as possible, the loop never runs more than one flush
+        // interval (logger.flush_every_cycles) ahead of the logger: a kill -9
+        // then loses at most ~2 x flush_every_cycles cycles, not a whole
+        // queue (65 536 records, 16 s of loop time).
+        const std::size_t log_limit = std::min<std::size_t>(
+            cfg.loop.log_queue_capacity,
+            static_cast<std::size_t>(std::max<long long>(cfg.logger.flush_every_cycles, 0)) + 64 + 64);
+        QueueBackpressure bp(want_log ? &log_q : nullptr, log_limit, want_bus ? &bus_q : nullptr,
+                             cfg.loop.bus_queue_capacity, &helper_failed);
         rep.cycles = run_as_fast_as_possible(body, timing, &bp);
       }
     }
@@ -186,20 +216,22 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
   // --- logger --------------------------------------------------------------------
   const manip::session_t session = schema::to_message(session_of_run(cfg, opt.source, copt.utime_start_us));
   Logger logger(log_q, cfg.safety.fault_history_cycles, cfg.logger.flush_interval_s);
+  logger.set_flush_every_cycles(cfg.logger.flush_every_cycles);
   if (want_log) {
-    std::error_code ec;
-    if (!opt.overwrite_log && std::filesystem::exists(opt.log_path, ec))
-      return abort_run(exit_code::kOutput,
-                       opt.log_path + ": log file exists; refusing to overwrite a recording (--force to overwrite)");
+    // LockedOutput inside: O_EXCL (no check-then-open race), --force without
+    // truncating a file another instance holds, flock for the session.
     std::string err;
-    if (!logger.open(opt.log_path, session, err)) return abort_run(exit_code::kOutput, "cannot create the log: " + err);
+    if (!logger.open(opt.log_path, session, err, opt.overwrite_log))
+      return abort_run(exit_code::kOutput, "cannot create the log: " + err);
     ctl.set_logger_failed_flag(&logger.failed_flag());
   } else if (!opt.quiet) {
     out << "manip_rt: warning: no log file: nothing of this session is recorded\n";
   }
+  // A start that fails after the log was created (bus, backend) leaves no
+  // stub behind: nothing of a session was recorded, and a stub would block
+  // the rerun without --force.
   auto close_log_and_abort = [&](int code, const std::string& msg) {
-    std::string e2;
-    logger.close(e2);
+    if (want_log) logger.discard();
     return abort_run(code, msg);
   };
 
@@ -226,33 +258,68 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
 
   // --- helper threads, then the loop -------------------------------------------
   std::atomic<bool> logger_stop{false}, bus_stop{false};
+  // No thread body may end in std::terminate (no safe law, no summary, log
+  // cut): an exception in a helper thread requests the orderly safe stop,
+  // and the run ends with exit 70 and the reason.
+  std::mutex internal_mu;
+  std::string internal_error;
+  auto on_internal = [&](const char* where, const char* what) noexcept {
+    try {
+      std::lock_guard<std::mutex> lk(internal_mu);
+      if (internal_error.empty()) internal_error = std::string(where) + ": " + what;
+    } catch (...) {
+    }
+    helper_failed.store(true, std::memory_order_relaxed);
+    ctl.request_stop(StopReason::kRequested);
+  };
+  auto guarded = [&](const char* where, auto&& fn) noexcept {
+    try {
+      fn();
+    } catch (const std::exception& e) {
+      on_internal(where, e.what());
+    } catch (...) {
+      on_internal(where, "unknown exception");
+    }
+  };
   std::thread logger_thread;
   const int avoid = opt.realtime ? cfg.loop.cpu : -1;  // keep the helpers off the loop's CPU
   if (want_log)
     logger_thread = std::thread([&] {
-      avoid_cpu(avoid);
-      logger.run(logger_stop);
+      guarded("logger thread", [&] {
+        avoid_cpu(avoid);
+        logger.run(logger_stop);
+      });
     });
   std::thread bus_thread;
   if (bus)
     bus_thread = std::thread([&] {
-      avoid_cpu(avoid);
-      bus->run(bus_stop);
+      guarded("bus thread", [&] {
+        avoid_cpu(avoid);
+        bus->run(bus_stop);
+      });
     });
   const auto wall0 = std::chrono::steady_clock::now();
   release_loop(true);
 
   // --- supervisor ----------------------------------------------------------------
   bool interrupted = false;
+  int signal_no = 0;
   auto next_progress = std::chrono::steady_clock::now() + std::chrono::duration<double>(opt.progress_interval_s);
   while (!loop_done.load(std::memory_order_acquire)) {
     std::this_thread::sleep_for(5ms);
     if (!interrupted && opt.interrupt && opt.interrupt->load()) {
       interrupted = true;
-      out << "manip_rt: interrupted: stopping safely (zero force, log closed)\n";
+      signal_no = opt.interrupt_signal ? opt.interrupt_signal->load() : 0;
       ctl.request_stop(StopReason::kRequested);
+      guarded("supervisor", [&] {
+        out << "manip_rt: interrupted by " << signal_name(signal_no)
+            << ": stopping safely (zero force, log closed)\n"
+            << std::flush;
+      });
     }
-    if (!opt.quiet && opt.progress_interval_s > 0 && std::chrono::steady_clock::now() >= next_progress) {
+    if (opt.quiet || opt.progress_interval_s <= 0) continue;
+    guarded("supervisor", [&] {
+    if (std::chrono::steady_clock::now() >= next_progress) {
       next_progress += std::chrono::duration<double>(opt.progress_interval_s);
       const auto& st = ctl.status();
       const auto cyc = st.cycle.load(std::memory_order_relaxed);
@@ -264,17 +331,20 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
                     static_cast<long long>(st.log_drops.load(std::memory_order_relaxed)));
       out << buf << std::flush;
     }
+    });
   }
   loop_thread.join();
   backend.shutdown();
   rep.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
 
+  if (bus) rep.bus_packets_dropped = udp_socket_drops();  // before the bus (and its socket) goes
   bus_stop.store(true, std::memory_order_release);
   if (bus_thread.joinable()) bus_thread.join();
   logger_stop.store(true, std::memory_order_release);
   if (logger_thread.joinable()) logger_thread.join();
   std::string log_err;
-  const bool log_ok = !want_log || logger.close(log_err);
+  bool log_ok = true;
+  guarded("closing the log", [&] { log_ok = !want_log || logger.close(log_err); });
 
   // --- report --------------------------------------------------------------------
   const auto& st = ctl.status();
@@ -286,11 +356,22 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
   rep.bus_drops = st.bus_drops.load();
   rep.commands_accepted = st.commands_accepted.load();
   rep.commands_rejected = st.commands_rejected.load() + (bus ? bus->command_rejects() : 0);
+  rep.commands_received = bus ? bus->commands_received() : 0;
+  rep.signal = signal_no;
   rep.fault_flags = st.fault_flags.load();
   rep.trials = ctl.protocol().counters();
   rep.remaining_slots = ctl.protocol().remaining();
 
-  if (!log_ok || rep.stop_reason == StopReason::kLogger) {
+  std::string internal;
+  {
+    std::lock_guard<std::mutex> lk(internal_mu);
+    internal = internal_error;
+  }
+  if (!internal.empty()) {
+    rep.exit_code = exit_code::kInternal;
+    rep.message = "internal error in the " + internal +
+                  " (a bug: please report it); the session was stopped safely (safe law, log closed)";
+  } else if (!log_ok || rep.stop_reason == StopReason::kLogger) {
     rep.exit_code = exit_code::kOutput;
     rep.message = "log writing failed: " + (log_err.empty() ? logger.error() : log_err) +
                   " (the session was stopped; motors were put in the safe state)";
@@ -299,7 +380,13 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
     rep.message = "session ended by a safety fault: " + control::fault_names(rep.fault_flags);
   } else if (interrupted) {
     rep.exit_code = exit_code::kInterrupted;
-    rep.message = "interrupted; stopped safely";
+    rep.message = std::string("interrupted by ") + signal_name(signal_no) + "; stopped safely";
+  } else if (rep.fault_flags != 0) {
+    // A paced session that reached --duration (or its end) with a fault
+    // still latched must not look like a good one.
+    rep.exit_code = exit_code::kFault;
+    rep.message = std::string(rep.stop_reason == StopReason::kDuration ? "duration reached" : "session ended") +
+                  " with a latched safety fault: " + control::fault_names(rep.fault_flags);
   } else {
     rep.exit_code = exit_code::kOk;
     rep.message = rep.stop_reason == StopReason::kDuration ? "duration reached" : "session complete";

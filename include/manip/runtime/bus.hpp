@@ -67,6 +67,13 @@ class CommandGate {
   std::int64_t received_{0}, rejected_{0};
 };
 
+// Datagrams the kernel dropped on this process's UDP sockets (receive buffer
+// full), from /proc/self/net/udp: under a command flood the packets lost
+// before manip_rt could read them (LCM's udpm socket also receives manip_rt's
+// own publications, so this counts all of them). -1 is never returned; 0 if
+// the table is unreadable.
+std::int64_t udp_socket_drops();
+
 class Bus {
  public:
   struct Links {
@@ -95,7 +102,12 @@ class Bus {
   [[nodiscard]] const CommandGate& gate() const { return gate_; }
   [[nodiscard]] std::int64_t published_states() const { return published_states_; }
   [[nodiscard]] std::int64_t publish_errors() const { return publish_errors_; }
-  [[nodiscard]] std::int64_t command_rejects() const { return gate_.rejected(); }
+  // Commands refused on the bus side (undecodable, invalid, loop queue full)
+  // plus commands whose handling threw (counted, never propagated).
+  [[nodiscard]] std::int64_t command_rejects() const {
+    return gate_.rejected() + handler_errors_.load(std::memory_order_relaxed);
+  }
+  [[nodiscard]] std::int64_t commands_received() const { return gate_.received(); }
 
  private:
   static void c_on_command(const _lcm_recv_buf_t* rbuf, const char* channel, void* self);
@@ -104,6 +116,7 @@ class Bus {
   template <class Msg>
   void publish(const char* channel, const Msg& m);
 
+  static constexpr int kMaxMessagesPerPoll = 256;
   RtConfig cfg_;
   Links links_;
   std::unique_ptr<lcm::LCM> lcm_;
@@ -112,6 +125,7 @@ class Bus {
   std::int64_t next_health_ns_{0};
   std::int64_t published_states_{0};
   std::int64_t publish_errors_{0};
+  std::atomic<std::int64_t> handler_errors_{0};
 };
 
 }  // namespace manip::runtime

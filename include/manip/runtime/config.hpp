@@ -43,6 +43,10 @@ struct LoopConfig {
 
 struct LoggerConfig {
   double flush_interval_s{0.5};
+  // Also flush every this many cycles (optional key; an as-fast-as-possible
+  // run makes many cycles per wall-clock second): a kill -9 loses at most
+  // this many cycles plus the log queue's content.
+  long long flush_every_cycles{4000};
   bool operator==(const LoggerConfig&) const = default;
 };
 

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "manip/command_status_t.hpp"
+#include "manip/common/output_file.hpp"
 #include "manip/control/records.hpp"
 #include "manip/runtime/spsc_queue.hpp"
 #include "manip/fault_t.hpp"
@@ -44,7 +45,10 @@ struct LoggerStats {
   std::int64_t missing_cycles{0};    // gaps in the cycle counter seen by the logger
   std::int64_t discarded{0};         // records drained but not written after a failure
   std::int64_t flushes{0};
-  std::int64_t events_in_file{0};    // events in the file (session message included)
+  std::int64_t events_in_file{0};    // events that reached the file (session message included): after a
+                                     // write failure, only those of the last successful flush
+  std::int64_t fault_history_states{0};  // states written inside fault_t.history (each state at most once)
+  std::int64_t faults_not_printed{0};    // fault lines on stderr suppressed by the rate limit
 };
 
 class Logger {
@@ -54,8 +58,18 @@ class Logger {
   Logger(const Logger&) = delete;
   Logger& operator=(const Logger&) = delete;
 
-  // Creates the file and writes the session message. False + err if that fails.
-  bool open(const std::string& path, const manip::session_t& session, std::string& err);
+  // Creates the file (common/output_file.hpp LockedOutput: O_EXCL, or with
+  // `force` without truncating a file another instance holds; flock for the
+  // whole session) and writes the session message. False + err if that fails
+  // (err names the path: exists, in use, cannot create).
+  bool open(const std::string& path, const manip::session_t& session, std::string& err, bool force = false);
+  // A start that failed after open(): remove the file this logger created, so
+  // no stub blocks the rerun.
+  void discard();
+  // Flush every n states as well as every flush_interval_s (an as-fast-as-
+  // possible run produces many cycles per second: a kill -9 then loses at
+  // most n cycles plus the queue). 0 = wall-clock only.
+  void set_flush_every_cycles(std::int64_t n) { flush_every_states_ = n; }
   void set_aux_queue(AuxQueue* q) { aux_ = q; }
   // Called (logger thread) with every fault record written, e.g. to publish it.
   void set_fault_sink(std::function<void(const manip::fault_t&)> sink) { fault_sink_ = std::move(sink); }
@@ -82,12 +96,22 @@ class Logger {
   void write(const char* channel, std::int64_t utime, const Msg& m);
   void fail(const std::string& why);
   void maybe_flush(bool force);
+  [[nodiscard]] std::int64_t events_on_disk() const;
   void publish_stats();
+  void print_fault(const manip::fault_t& m, std::uint32_t flags);
 
   RecordQueue& q_;
   AuxQueue* aux_{nullptr};
   logging::EventLogWriter w_;
+  LockedOutput lock_;  // holds the flock (and the right to discard) for the session
   bool open_{false};
+  std::int64_t flush_every_states_{0};
+  std::int64_t states_since_flush_{0};
+  std::int64_t events_flushed_{0};     // events_written() at the last successful flush
+  std::int64_t history_until_cycle_{-1};  // newest state already written in a fault history
+  std::int64_t print_window_ns_{0};
+  int printed_in_window_{0};
+  std::int64_t suppressed_in_window_{0};
   std::vector<manip::state_t> ring_;
   std::size_t ring_head_{0}, ring_fill_{0};
   double flush_interval_s_;

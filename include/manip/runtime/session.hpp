@@ -62,6 +62,7 @@ struct RunOptions {
   bool quiet{false};
   double progress_interval_s{10.0};  // progress lines on `out` (0 = none)
   const std::atomic<bool>* interrupt{nullptr};  // set by a signal handler
+  const std::atomic<int>* interrupt_signal{nullptr};  // which signal (named in the message), optional
   std::string source{"manip_rt/sim"};
   RtEnvironment rt{};
 };
@@ -77,11 +78,17 @@ struct RunReport {
   LoggerStats log{};
   std::int64_t log_drops{0}, bus_drops{0};
   std::int64_t commands_accepted{0}, commands_rejected{0};
+  std::int64_t commands_received{0};  // on the bus (decodable or not)
+  std::int64_t bus_packets_dropped{0};  // kernel drops on the LCM socket (udp_socket_drops)
+  int signal{0};                      // the signal that interrupted the run, 0 if none
   std::uint32_t fault_flags{0};
   control::Protocol::Counters trials{};
   int remaining_slots{0};
   [[nodiscard]] std::string summary() const;
 };
+
+// "SIGHUP" etc. for messages.
+const char* signal_name(int sig);
 
 // The session message of a run: cfg.session with source, start time and the
 // effective configuration text filled in.
