@@ -14,6 +14,7 @@ PKGS=(
   python3 python3-venv python3-numpy python3-scipy python3-matplotlib
   rt-tests stress-ng iproute2
   chromium fonts-dejavu-core
+  python3-pygame xvfb xauth
 )
 
 SUDO=""
