@@ -145,8 +145,32 @@ def disc_check(img, colour, center, r_px, exclude=None, label=""):
           % (label, center[0], center[1], r_px, n, outside, cover, where))
 
 
+def units():
+    """Statistics and geometry against independent references (numpy, hand-computed)."""
+    sys.path.insert(0, os.path.join(SRC, "python"))
+    from manipdisplay.stats import missed_periods, percentile
+    from manipdisplay.geometry import ScreenMap, workspace_to_shoulder
+    from manipdisplay.config import Mapping, Screen
+    xs = list(np.random.default_rng(1).exponential(3.0, 1001))
+    check(all(abs(percentile(xs, q) - np.percentile(xs, q)) < 1e-12 for q in (0, 50, 99, 100)),
+          "percentile matches numpy")
+    p = 1 / 60
+    check([missed_periods(d * p, p) for d in (1.0, 1.49, 1.51, 2.0, 3.2)] == [0, 0, 1, 1, 2],
+          "missed periods: 1, 1.49, 1.51, 2, 3.2 periods -> 0, 0, 1, 1, 2 dropped")
+    # 90 deg counter-clockwise: shoulder +x1 points up the screen, +x2 to the left.
+    m = ScreenMap(Screen(width_px=1000, height_px=500, width_m=0.5, height_m=0.25),
+                  Mapping(center_shoulder_m=(0.0, 0.4), scale=2.0, rotation_deg=90.0), (1000, 500))
+    px = m.to_px((0.01, 0.4))
+    check(abs(px[0] - 500) < 1e-9 and abs(px[1] - (250 - 0.02 * 2000)) < 1e-9, "rotation 90 deg: +x1 -> up (%s)" % (px,))
+    px = m.to_px((0.0, 0.41))
+    check(abs(px[0] - (500 - 40)) < 1e-9 and abs(px[1] - 250) < 1e-9, "rotation 90 deg: +x2 -> left (%s)" % (px,))
+    ps = workspace_to_shoulder((0.1, 0.0), (0.0, 0.425), math.pi / 2)
+    check(abs(ps[0]) < 1e-12 and abs(ps[1] - 0.525) < 1e-12, "workspace -> shoulder with a 90 deg frame")
+
+
 def main():
     tmp = tempfile.mkdtemp(prefix="manip_display_test_")
+    units()
     bad_inputs(tmp)
     cfg = os.path.join(tmp, "display.yaml")
     with open(cfg, "w") as f:
@@ -235,6 +259,7 @@ def main():
         lc.publish("MANIP_COMMAND", cmd.encode())
         arrived = pump(2, lambda: any(m.command_seq == seq for _, m in got["targets"]))
         t_tg = next((t for t, m in got["targets"] if m.command_seq == seq), float("nan"))
+        pump(2, lambda: any(s.seq == seq for s in got["status"]))  # published right after MANIP_TARGETS
         st = [s for s in got["status"] if s.seq == seq]
         check(bool(st) and st[0].accepted, "SET_TARGETS accepted: %s" % (st[0].reason if st else "no status"))
         tg_ok = arrived and any(m.command_seq == seq and tuple(m.start_shoulder_m) == new_start and
