@@ -164,6 +164,12 @@ def units():
     check(abs(px[0] - 500) < 1e-9 and abs(px[1] - (250 - 0.02 * 2000)) < 1e-9, "rotation 90 deg: +x1 -> up (%s)" % (px,))
     px = m.to_px((0.0, 0.41))
     check(abs(px[0] - (500 - 40)) < 1e-9 and abs(px[1] - 250) < 1e-9, "rotation 90 deg: +x2 -> left (%s)" % (px,))
+    from manipdisplay import config as cfgmod
+    ex = cfgmod.load(os.path.join(SRC, "python", "manipdisplay", "display.yaml"))
+    d = cfgmod.DisplayConfig()
+    check((ex.screen, ex.mapping, ex.appearance, ex.fallback_frame) == (d.screen, d.mapping, d.appearance,
+                                                                        d.fallback_frame),
+          "the example display.yaml loads and states the built-in defaults")
     ps = workspace_to_shoulder((0.1, 0.0), (0.0, 0.425), math.pi / 2)
     check(abs(ps[0]) < 1e-12 and abs(ps[1] - 0.525) < 1e-12, "workspace -> shoulder with a 90 deg frame")
 
