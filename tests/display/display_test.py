@@ -263,7 +263,7 @@ def main():
         cmd.start_shoulder_m, cmd.goal_shoulder_m = list(new_start), list(new_goal)
         t_cmd = time.monotonic()
         lc.publish("MANIP_COMMAND", cmd.encode())
-        arrived = pump(2, lambda: any(m.command_seq == seq for _, m in got["targets"]))
+        arrived = pump(0.5, lambda: any(m.command_seq == seq for _, m in got["targets"]))
         t_tg = next((t for t, m in got["targets"] if m.command_seq == seq), float("nan"))
         pump(2, lambda: any(s.seq == seq for s in got["status"]))  # published right after MANIP_TARGETS
         st = [s for s in got["status"] if s.seq == seq]
@@ -319,6 +319,11 @@ def main():
         check(meta["trial"] == s.trial and meta["phase"] == s.phase,
               "snapshot %d: display's trial/phase %d/%d match the log %d/%d at cycle %d"
               % (n, meta["trial"], meta["phase"], s.trial, s.phase, s.cycle))
+        if n == 1:
+            # what makes "at once" testable: the new targets on the screen while the old trial's rest
+            # continues, before the next trial's START event could have carried them
+            check(s.trial == -1 and s.phase == 1, "snapshot 1 shows the rest before trial 1 (trial %d, phase %d)"
+                  % (s.trial, s.phase))
         if n == 0:
             start, goal = starts[0].start_shoulder_m, starts[0].goal_shoulder_m
         else:
