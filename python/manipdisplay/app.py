@@ -321,8 +321,13 @@ def main(argv=None) -> int:
         if args.windowed:
             surf = pg.display.set_mode(args.windowed)
         else:
-            surf = pg.display.set_mode((cfg.screen.width_px, cfg.screen.height_px), pg.FULLSCREEN)
+            # The desktop's own mode: changing the monitor's mode would change its pixel pitch.
+            surf = pg.display.set_mode((0, 0), pg.FULLSCREEN)
             pg.mouse.set_visible(False)
+            if surf.get_size() != (cfg.screen.width_px, cfg.screen.height_px):
+                print("manipdisplay: warning: the screen is %dx%d px but %s says screen.width_px/height_px "
+                      "%dx%d: the scaling is wrong until the configuration is fixed (docs/display.md)"
+                      % (surf.get_size() + (cfg.source, cfg.screen.width_px, cfg.screen.height_px)), file=sys.stderr)
         pg.display.set_caption("manipdisplay")
     except pg.error as e:
         print("manipdisplay: the screen cannot be opened (DISPLAY=%s): %s"
@@ -365,7 +370,12 @@ def main(argv=None) -> int:
                 disp.stats.shown(t_present - disp.state_rx, time.time() - disp.state.utime * 1e-6)
             if disp.snapshot_requested:
                 disp.snapshot_requested = False
-                disp.save_snapshot(pg, surf, dict(shown, present_monotonic_s=t_present))
+                try:
+                    disp.save_snapshot(pg, surf, dict(shown, present_monotonic_s=t_present))
+                except (OSError, pg.error) as e:
+                    # the participant's screen keeps running: a snapshot is a diagnostic
+                    print("manipdisplay: warning: snapshot in %s not written: %s" % (args.snapshot_dir, e),
+                          file=sys.stderr)
             if t_present >= next_health:
                 disp.publish_health()
                 next_health += 1.0
@@ -376,9 +386,6 @@ def main(argv=None) -> int:
             if next_frame < t_present - period:
                 next_frame = t_present
         code = disp.stop_code
-    except OSError as e:
-        print("manipdisplay: output: %s" % e, file=sys.stderr)
-        code = ec.OUTPUT
     finally:
         pg.display.quit()
     disp.publish_health()
