@@ -284,6 +284,16 @@ def _round(p):
 
 def main(argv=None) -> int:
     try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        return ec.INTERRUPTED
+    except Exception as e:  # noqa: BLE001 - one line and the documented code, never a traceback
+        print("manipdisplay: internal error (please report): %s: %s" % (type(e).__name__, e), file=sys.stderr)
+        return ec.INTERNAL
+
+
+def _main(argv=None) -> int:
+    try:
         args = build_parser().parse_args(argv)
     except UsageError as e:
         print("manipdisplay: usage: %s (see --help)" % e, file=sys.stderr)
@@ -314,7 +324,12 @@ def main(argv=None) -> int:
               % (args.lcm_url or os.environ.get("LCM_DEFAULT_URL", "default"), e), file=sys.stderr)
         return ec.BUS
     os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-    import pygame as pg
+    try:
+        import pygame as pg
+    except ImportError as e:
+        print("manipdisplay: the screen cannot be opened: pygame is missing (Debian: python3-pygame, "
+              "scripts/setup.sh): %s" % e, file=sys.stderr)
+        return ec.BACKEND
     try:
         pg.display.init()
         pg.font.init()
