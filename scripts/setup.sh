@@ -15,6 +15,7 @@ PKGS=(
   rt-tests stress-ng iproute2
   chromium fonts-dejavu-core
   libmatio-dev
+  python3-pygame xvfb xauth
 )
 
 SUDO=""

@@ -96,7 +96,10 @@ std::optional<manip::command_status_t> CommandGate::submit(const void* data, int
 }
 
 Bus::Bus(const RtConfig& cfg, Links links)
-    : cfg_(cfg), links_(links), gate_(*links.to_loop, CommandLimits::from_config(cfg)) {}
+    : cfg_(cfg), links_(links), gate_(*links.to_loop, CommandLimits::from_config(cfg)) {
+  cue_.start_shoulder_m = cfg.protocol.start_shoulder_m;
+  cue_.goal_shoulder_m = cfg.protocol.goal_shoulder_m;
+}
 
 Bus::~Bus() {
   if (lcm_ && sub_) lcm_unsubscribe(lcm_->getUnderlyingLCM(), sub_);
@@ -123,7 +126,10 @@ void Bus::publish(const char* channel, const Msg& m) {
   if (lcm_->publish(channel, &m) != 0) ++publish_errors_;
 }
 
-void Bus::publish_session(const manip::session_t& s) { publish(channels::kSession, s); }
+void Bus::publish_session(const manip::session_t& s) {
+  publish(channels::kSession, s);
+  publish_targets();
+}
 void Bus::publish_fault(const manip::fault_t& f) { publish(channels::kFault, f); }
 
 void Bus::c_on_command(const _lcm_recv_buf_t* rbuf, const char* /*channel*/, void* self) {
@@ -141,6 +147,12 @@ void Bus::c_on_command(const _lcm_recv_buf_t* rbuf, const char* /*channel*/, voi
 void Bus::on_command(const void* data, int size) {
   const std::int8_t mode = links_.status ? links_.status->mode.load(std::memory_order_relaxed) : 0;
   auto rejected = gate_.submit(data, size, wall_clock_us(), mode);
+  manip::command_t c{};
+  if (!rejected && c.decode(data, 0, size) == size && c.kind == manip::command_t::SET_TARGETS) {
+    if (pending_targets_.size() >= 256) pending_targets_.pop_front();  // the loop answers every command: bound only
+    pending_targets_.push_back(Command{c.seq, c.kind, Vec2(c.start_shoulder_m[0], c.start_shoulder_m[1]),
+                                       Vec2(c.goal_shoulder_m[0], c.goal_shoulder_m[1])});
+  }
   if (rejected) {
     publish(channels::kCommandStatus, *rejected);
     if (links_.to_logger) links_.to_logger->push_growing(AuxRecord(*rejected));
@@ -151,6 +163,7 @@ void Bus::drain_loop() {
   if (!links_.from_loop) return;
   LoopRecord r;
   while (links_.from_loop->try_pop(r)) {
+    track_targets(r);
     if (const auto* s = std::get_if<manip::state_t>(&r)) {
       publish(channels::kStateLive, *s);
       ++published_states_;
@@ -161,6 +174,43 @@ void Bus::drain_loop() {
     }
     // FaultRecord: published with its history by the logger's fault sink.
   }
+}
+
+// The display must show a SET_TARGETS the moment the loop applies it, not at the
+// next trial START: the loop's answer (CommandResultRecord) says when, the
+// command remembered at submission says what.
+void Bus::track_targets(const LoopRecord& r) {
+  bool changed = false;
+  if (const auto* s = std::get_if<manip::state_t>(&r)) {
+    cue_cycle_ = s->cycle;
+    changed = s->phase != static_cast<std::int8_t>(cue_.phase) || s->trial != cue_.trial;
+    cue_.phase = static_cast<Phase>(s->phase);
+    cue_.trial = s->trial;
+  } else if (const auto* e = std::get_if<TrialEventRecord>(&r)) {
+    if (e->kind == manip::trial_event_t::START) {
+      changed = e->start_shoulder_m != cue_.start_shoulder_m || e->goal_shoulder_m != cue_.goal_shoulder_m;
+      cue_.start_shoulder_m = e->start_shoulder_m;
+      cue_.goal_shoulder_m = e->goal_shoulder_m;
+    }
+  } else if (const auto* c = std::get_if<CommandResultRecord>(&r); c && c->kind == manip::command_t::SET_TARGETS) {
+    while (!pending_targets_.empty() && pending_targets_.front().seq != c->seq) pending_targets_.pop_front();
+    if (!pending_targets_.empty()) {
+      if (c->accepted) {
+        cue_.start_shoulder_m = pending_targets_.front().start_shoulder_m;
+        cue_.goal_shoulder_m = pending_targets_.front().goal_shoulder_m;
+        cue_seq_ = c->seq;
+        changed = true;
+      }
+      pending_targets_.pop_front();
+    }
+  }
+  if (changed) publish_targets();
+}
+
+void Bus::publish_targets() {
+  publish(channels::kTargets, to_targets_message(cue_, cue_cycle_, cfg_.protocol.target_radius_m,
+                                                 cfg_.session.perturbation.trigger_x2_shoulder_m, cue_seq_));
+  next_targets_ns_ = mono_ns() + 1'000'000'000;
 }
 
 void Bus::publish_health() {
@@ -243,6 +293,7 @@ void Bus::poll(int timeout_ms) {
     publish_health();
     next_health_ns_ = now + static_cast<std::int64_t>(1e9 / cfg_.bus.health_rate_hz);
   }
+  if (now >= next_targets_ns_) publish_targets();
 }
 
 void Bus::run(const std::atomic<bool>& stop) {

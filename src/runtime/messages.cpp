@@ -39,6 +39,23 @@ manip::command_status_t to_message(const CommandResultRecord& r) {
   return m;
 }
 
+manip::targets_t to_targets_message(const DisplayCue& cue, std::int64_t cycle, double target_radius_m,
+                                    double trigger_x2_shoulder_m, std::int64_t command_seq) {
+  manip::targets_t m{};
+  m.utime = wall_clock_us();
+  m.cycle = cycle;
+  m.trial = cue.trial;
+  m.phase = static_cast<std::int8_t>(cue.phase);
+  for (int i = 0; i < 2; ++i) {
+    m.start_shoulder_m[i] = cue.start_shoulder_m[i];
+    m.goal_shoulder_m[i] = cue.goal_shoulder_m[i];
+  }
+  m.target_radius_m = target_radius_m;
+  m.trigger_x2_shoulder_m = trigger_x2_shoulder_m;
+  m.command_seq = command_seq;
+  return m;
+}
+
 std::string fault_reason(const FaultRecord& r) {
   std::string s = fault_names(r.new_flags);
   const std::uint32_t first = r.new_flags & (~r.new_flags + 1);  // lowest bit

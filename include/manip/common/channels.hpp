@@ -10,6 +10,8 @@ inline constexpr const char* kCommand = "MANIP_COMMAND";          // command_t, 
 inline constexpr const char* kCommandStatus = "MANIP_COMMAND_STATUS";  // command_status_t
 inline constexpr const char* kHealth = "MANIP_HEALTH";            // health_t
 inline constexpr const char* kFault = "MANIP_FAULT";              // fault_t
+inline constexpr const char* kTargets = "MANIP_TARGETS";          // targets_t (live bus: display cue, on change + ~1 Hz)
+inline constexpr const char* kDisplayHealth = "MANIP_DISPLAY_HEALTH";  // display_health_t (manipdisplay, ~1 Hz)
 inline constexpr const char* kTruthState = "MANIP_TRUTH_STATE";   // state_t of the unperturbed twin (simulators)
 inline constexpr const char* kTruthImpedance = "MANIP_TRUTH_IMPEDANCE";  // impedance_truth_t (simulators)
 

@@ -14,6 +14,7 @@
 // cycle, so a flood or garbage on the channel cannot disturb it.
 #include <atomic>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <string>
@@ -115,6 +116,9 @@ class Bus {
   void drain_loop();
   template <class Msg>
   void publish(const char* channel, const Msg& m);
+  // MANIP_TARGETS (participant display): on every change of cue_ and at ~1 Hz.
+  void track_targets(const control::LoopRecord& r);
+  void publish_targets();
 
   static constexpr int kMaxMessagesPerPoll = 256;
   RtConfig cfg_;
@@ -126,6 +130,10 @@ class Bus {
   std::int64_t published_states_{0};
   std::int64_t publish_errors_{0};
   std::atomic<std::int64_t> handler_errors_{0};
+  control::DisplayCue cue_{};              // what the display shows, as last published
+  std::int64_t cue_cycle_{0}, cue_seq_{-1};
+  std::deque<control::Command> pending_targets_;  // SET_TARGETS handed to the loop, awaiting its answer
+  std::int64_t next_targets_ns_{0};
 };
 
 }  // namespace manip::runtime

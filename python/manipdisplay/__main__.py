@@ -1,0 +1,5 @@
+import sys
+
+from manipdisplay.app import main
+
+sys.exit(main())
