@@ -14,6 +14,8 @@ PKGS=(
   python3 python3-venv python3-numpy python3-scipy python3-matplotlib
   rt-tests stress-ng iproute2
   chromium fonts-dejavu-core
+  # install/CPack (.deb dependencies by dpkg-shlibdeps) and the Java/MATLAB jar (docs/matlab.md)
+  dpkg-dev file default-jdk-headless liblcm-java
 )
 
 SUDO=""
