@@ -128,8 +128,8 @@ std::optional<int> parse(CLI::App& app, int argc, const char* const* argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e) == 0 ? exit_code::kOk : exit_code::kUsage;
   } catch (const CLI::ParseError& e) {
-    // One line naming the option; the usage pointer on a second.
-    std::cerr << app.get_name() << ": " << e.what() << "\n" << "Run with --help for more information.\n";
+    // One line naming the option (CLI11 puts it first: "--noise: ...").
+    std::cerr << app.get_name() << ": " << e.what() << " (see --help)\n";
     return exit_code::kUsage;
   }
   return std::nullopt;
