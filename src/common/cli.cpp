@@ -108,7 +108,8 @@ std::string exit_code_table(const std::vector<int>& codes) {
   std::string t = "Exit codes (docs/exit-codes.md):\n";
   for (int c : codes) {
     std::string n = std::to_string(c);
-    t += "  " + std::string(n.size() < 3 ? 3 - n.size() : 0, ' ') + n + "  " + exit_code::name(c) + "\n";
+    // "  3 configuration invalid": codes right-aligned, one space (scripts grep "<code> <name>").
+    t += "  " + std::string(n.size() < 3 ? 3 - n.size() : 0, ' ') + n + " " + exit_code::name(c) + "\n";
   }
   return t;
 }

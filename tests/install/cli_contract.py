@@ -4,7 +4,7 @@
     cli_contract.py SOURCE_DIR APP_BINARY [--returns]
 
 * `--help` exits 0 and prints "Exit codes (docs/exit-codes.md):" followed by
-  rows "  <code>  <name>" whose names equal common/exit_codes' names for those
+  rows "  <code> <name>" whose names equal common/exit_codes' names for those
   codes. The reference table is read independently of the binary, from
   include/manip/common/exit_codes.hpp (constant -> number) and
   src/common/exit_codes.cpp (constant -> name).
@@ -46,7 +46,7 @@ def printed_table(help_text):
         return None
     rows = {}
     for line in lines[i + 1:]:
-        m = re.match(r"^\s+(\d+)  (\S.*)$", line)
+        m = re.match(r"^\s+(\d+) (\S.*)$", line)
         if not m:
             break
         rows[int(m.group(1))] = m.group(2)

@@ -59,8 +59,8 @@ std::string join(const std::vector<std::string>& values, const std::string& sep 
 // The rows of the one exit-code table (common/exit_codes.hpp) for `codes`, in
 // the order given:
 //   Exit codes (docs/exit-codes.md):
-//     0  ok
-//     2  usage error
+//       0 ok
+//       2 usage error
 std::string exit_code_table(const std::vector<int>& codes);
 // Appends exit_code_table(codes) to the app's footer (after any footer set before).
 void set_exit_codes(CLI::App& app, const std::vector<int>& codes);
