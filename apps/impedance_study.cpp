@@ -10,10 +10,14 @@
 #include <iostream>
 #include <map>
 #include <optional>
+#include <sstream>
 
 #include <nlohmann/json.hpp>
 
+#include "manip/common/cli.hpp"
 #include "manip/common/errors.hpp"
+#include "manip/common/output_file.hpp"
+#include "manip/version.hpp"
 #include "manip/estimation/session_estimator.hpp"
 #include "manip/sim/linear_human.hpp"
 #include "manip/sim/presets.hpp"
@@ -40,36 +44,64 @@ const char* kElem[7] = {"D11", "D12", "D21", "D22", "K11", "K12", "K22"};
 double elem(const Mat2& d, const Mat2& k, int e) { return e < 4 ? d(e / 2, e % 2) : (e == 4 ? k(0, 0) : e == 5 ? k(0, 1) : k(1, 1)); }
 
 int run(int argc, char** argv) {
-  CLI::App app{"impedance_study: accuracy of every estimator on seeded synthetic sessions with known D, K"};
-  app.footer("Exit codes (common/exit_codes.hpp): 0 ok; 2 bad command line (option, method name); 6 --json cannot be "
-             "written; 70 internal error.");
-  int sessions = 20, movements = 32;
+  namespace cli = manip::cli;
+  CLI::App app{"impedance_study " + std::string(kVersion) +
+                   ": accuracy of every estimator on seeded synthetic sessions with known D, K",
+               "impedance_study"};
+  cli::Common opt;
+  opt.movements = 32;
+  int sessions = 20;
   std::string json_path, persons = "table1,stiff", noises = "none,realistic";
   std::uint64_t seed0 = 1000;
-  app.add_option("--sessions", sessions, "seeded sessions per condition (default 20)");
-  app.add_option("--movements", movements, "movements per session (24 perturbed + unperturbed; default 32)");
-  app.add_option("--persons", persons, "comma list of table1, stiff");
-  app.add_option("--noise", noises, "comma list of none, realistic");
+  cli::add_version(app, "impedance_study");
+  cli::add_quiet(app, opt.quiet)->description("no per-session progress on stderr");
+  cli::add_out(app, opt.out, "the accuracy table (Markdown) to FILE instead of stdout");
+  cli::add_force(app, opt.force);
+  app.add_option("--sessions", sessions, "seeded sessions per condition")->check(CLI::Range(1, 100000))->capture_default_str();
+  cli::add_movements(app, opt.movements, 1, 100000, "movements per session (24 perturbed + unperturbed)");
+  const std::vector<std::string> kPersons = {"table1", "stiff"}, kNoises = {"none", "realistic"};
+  // Each comma-list element checked, so a misspelt name is refused, not silently run as table1.
+  auto each_of = [](const std::vector<std::string>& allowed) {
+    return CLI::Validator(
+        [allowed](std::string& s) -> std::string {
+          std::stringstream ss(s);
+          int n = 0;
+          for (std::string t; std::getline(ss, t, ','); ++n)
+            if (std::find(allowed.begin(), allowed.end(), t) == allowed.end())
+              return "'" + t + "' is not one of " + cli::join(allowed);
+          return n == 0 ? "empty list" : "";
+        },
+        "LIST");
+  };
+  app.add_option("--persons", persons, "comma list of " + cli::join(kPersons, ", "))->check(each_of(kPersons));
+  app.add_option("--noise", noises, "comma list of " + cli::join(kNoises, ", "))->check(each_of(kNoises));
   app.add_option("--seed", seed0, "first seed");
-  app.add_option("--json", json_path, "raw per-session results as JSON");
+  app.add_option("--json", json_path, "raw per-session results as JSON (kept if it exists, unless --force)");
   int oe_poly = -1;
   double oe_pre = -1;
   std::string methods = "all";
-  app.add_option("--oe-poly-order", oe_poly, "output-error polynomial order (default: estimator default)");
-  app.add_option("--oe-pre", oe_pre, "output-error data before onset [s] (default: estimator default)");
+  app.add_option("--oe-poly-order", oe_poly, "output-error polynomial order (default: estimator default)")
+      ->check(CLI::Range(0, 20));
+  app.add_option("--oe-pre", oe_pre, "output-error data before onset [s] (default: estimator default)")
+      ->check(cli::finite_range(0, 10));
   app.add_option("--methods", methods, "comma list of methods or 'all'");
   int prewhiten = -1;
   std::string pem_structure;
   double pem_pre = -1;
-  app.add_option("--pem-structure", pem_structure, "prediction error: box-jenkins | armax (default: estimator default)");
-  app.add_option("--pem-pre", pem_pre, "prediction error: data before onset [s] (default: estimator default)");
-  app.add_option("--oe-prewhiten", prewhiten, "output-error prewhitening AR order (default: estimator default)");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    const int rc = app.exit(e);
-    return rc == 0 ? exit_code::kOk : exit_code::kUsage;
-  }
+  app.add_option("--pem-structure", pem_structure, "prediction error: box-jenkins | armax (default: estimator default)")
+      ->check(cli::one_of({"box-jenkins", "armax"}));
+  app.add_option("--pem-pre", pem_pre, "prediction error: data before onset [s] (default: estimator default)")
+      ->check(cli::finite_range(0, 10));
+  app.add_option("--oe-prewhiten", prewhiten, "output-error prewhitening AR order (default: estimator default)")
+      ->check(CLI::Range(0, 50));
+  cli::set_exit_codes(app, {exit_code::kOk, exit_code::kUsage, exit_code::kOutput, exit_code::kInternal});
+  if (const auto rc = cli::parse(app, argc, argv)) return *rc;
+  const int movements = opt.movements;
+  // Outputs are checked before hours of computing, and written atomically at the end.
+  std::optional<AtomicOutput> table_out, json_out;
+  if (!opt.out.empty()) table_out.emplace(opt.out, opt.force);
+  if (!json_path.empty()) json_out.emplace(json_path, opt.force);
+  std::ostringstream table;
   if (!pem_structure.empty() && pem_structure != "box-jenkins" && pem_structure != "armax")
     throw UsageError("--pem-structure: must be box-jenkins or armax");
   auto split = [](const std::string& s) {
@@ -78,8 +110,16 @@ int run(int argc, char** argv) {
     for (std::string t; std::getline(ss, t, ',');) out.push_back(t);
     return out;
   };
+  // Without --out the table streams to stdout condition by condition, as before.
+  auto flush_table = [&] {
+    if (!table_out) {
+      std::cout << table.str();
+      std::cout.flush();
+      table.str("");
+    }
+  };
   nlohmann::json raw = nlohmann::json::array();
-  std::cout << "| person | noise | method | element | truth | median est | median rel. error | IQR of rel. error | "
+  table << "| person | noise | method | element | truth | median est | median rel. error | IQR of rel. error | "
                "|rel. error| median | 95% CI coverage | median SE / |truth| |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& person : split(persons)) {
     for (const auto& noise : split(noises)) {
@@ -132,7 +172,7 @@ int run(int argc, char** argv) {
           row["identifiable"] = sm.identifiable;
           raw.push_back(row);
         }
-        std::cerr << "impedance_study: " << person << "/" << noise << " session " << s + 1 << "/" << sessions << "\n";
+        if (!opt.quiet) std::cerr << "impedance_study: " << person << "/" << noise << " session " << s + 1 << "/" << sessions << "\n";
       }
       for (const auto& [method, vals] : est) {
         for (int e = 0; e < 7; ++e) {
@@ -149,7 +189,7 @@ int run(int argc, char** argv) {
             for (double x : cov) c += x;
             c /= static_cast<double>(cov.size());
           }
-          std::cout << std::fixed << std::setprecision(3) << "| " << person << " | " << noise << " | " << method << " | "
+          table << std::fixed << std::setprecision(3) << "| " << person << " | " << noise << " | " << method << " | "
                     << kElem[e] << " | " << tv << " | " << median(vals[static_cast<std::size_t>(e)]) << " | "
                     << median(rel) * 100 << "% | " << (quantile(rel, 0.75) - quantile(rel, 0.25)) * 100 << "% | "
                     << median(absrel) * 100 << "% | "
@@ -157,13 +197,16 @@ int run(int argc, char** argv) {
                     << " | " << median(rel_se[method][static_cast<std::size_t>(e)]) * 100 << "% |\n";
         }
       }
-      std::cout.flush();
+      flush_table();
     }
   }
-  if (!json_path.empty()) {
-    std::ofstream o(json_path);
-    if (!(o << raw.dump(1) << "\n")) throw OutputError(json_path + ": cannot write JSON");
-  }
+  auto write = [](AtomicOutput& o, const std::string& text) {
+    if (std::fwrite(text.data(), 1, text.size(), o.stream()) != text.size())
+      throw OutputError(o.path() + ": write failed");
+    o.commit();
+  };
+  if (json_out) write(*json_out, raw.dump(1) + "\n");
+  if (table_out) write(*table_out, table.str());
   return exit_code::kOk;
 }
 

@@ -6,41 +6,64 @@
 #include <thread>
 
 #include "manip/canopen/can_check.hpp"
+#include "manip/common/cli.hpp"
+#include "manip/common/errors.hpp"
+#include "manip/version.hpp"
 #include "manip/canopen/socketcan.hpp"
 
 namespace {
-const char* kExitCodes =
-    "Exit codes:\n"
-    "  0  every drive answered, configuration written and verified, PDO rates achieved\n"
-    "  1  configuration invalid (file:line: key: reason)\n"
-    "  2  worst-case bus load above master.max_bus_load\n"
-    "  3  a drive or the bus would stop a session (reason printed)\n"
-    "  4  CAN interface unavailable\n";
+namespace ec = manip::exit_code;
+// The one table (common/exit_codes.hpp): the check's own verdicts (can_check.hpp)
+// mapped onto it. A budget above master.max_bus_load is a configuration this bus
+// cannot run; a silent or misconfigured drive and a missing interface are the
+// hardware backend failing to come up, as manip_rt --backend can would report it.
+const std::vector<int> kExitCodes = {ec::kOk, ec::kUsage, ec::kConfig, ec::kBackend, ec::kInternal};
+int to_exit_code(int check) {
+  switch (check) {
+    case manip::canopen::kCheckOk: return ec::kOk;
+    case manip::canopen::kCheckConfig: return ec::kConfig;
+    case manip::canopen::kCheckBudget: return ec::kConfig;
+    case manip::canopen::kCheckDrive: return ec::kBackend;
+    case manip::canopen::kCheckInterface: return ec::kBackend;
+    default: return ec::kInternal;
+  }
 }
+}  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   using namespace manip::canopen;
-  CLI::App app{"manip_can_check: scan the configured CANopen bus, read identities, write and verify the "
-               "start-up configuration, measure PDO rates, print the bus budget"};
-  app.footer(kExitCodes);
-  std::string config;
+  namespace cli = manip::cli;
+  CLI::App app{"manip_can_check " + std::string(manip::kVersion) +
+                   ": scan the configured CANopen bus, read identities, write and verify the start-up "
+                   "configuration, measure PDO rates, print the bus budget",
+               "manip_can_check"};
+  app.footer(
+      "Verdicts: 0 every drive answered, configuration written and verified, PDO rates achieved; 3 the bus file is "
+      "invalid or its worst-case bus load is above master.max_bus_load; 8 a drive or the bus would stop a session, or "
+      "the CAN interface is unavailable (reason printed).");
+  cli::Common c;
   bool virt = false;
   std::string fault = "none";
   int periods = 2000;
-  app.add_option("--config", config, "bus configuration YAML")->required();
+  cli::add_version(app, "manip_can_check");
+  cli::add_quiet(app, c.quiet);
+  cli::add_config(app, c.config, "can.yaml", "bus configuration YAML");
   app.add_flag("--virtual", virt, "run simulated drives in-process on a virtual bus instead of SocketCAN");
-  app.add_option("--virtual-fault", fault, "with --virtual: none | never-boot | sdo-silent | wrong-node | tpdo-loss")
-      ->check(CLI::IsMember({"none", "never-boot", "sdo-silent", "wrong-node", "tpdo-loss"}))
+  const std::vector<std::string> faults = {"none", "never-boot", "sdo-silent", "wrong-node", "tpdo-loss"};
+  app.add_option("--virtual-fault", fault, "with --virtual: " + cli::join(faults))
+      ->check(cli::one_of(faults))
       ->capture_default_str();
-  app.add_option("--periods", periods, "SYNC periods of cyclic operation to measure")->check(CLI::PositiveNumber)
+  app.add_option("--periods", periods, "SYNC periods of cyclic operation to measure")->check(CLI::Range(1, 4000000))
       ->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
+  cli::set_exit_codes(app, kExitCodes);
+  if (const auto rc = cli::parse(app, argc, argv)) return *rc;
+  const std::string config = cli::find_config(c.config, "can.yaml");
 
   CanConfig cfg;
   std::vector<std::string> errors;
   if (!load_config(config, cfg, errors)) {
     for (const auto& e : errors) std::cerr << e << "\n";
-    return kCheckConfig;
+    return to_exit_code(kCheckConfig);
   }
   CheckResult r;
   if (virt) {
@@ -58,7 +81,7 @@ int main(int argc, char** argv) {
       auto p = SocketCanPort::open(b.interface, master_filters(), err);
       if (!p) {
         std::cerr << "manip_can_check: bus " << b.name << ": " << err << "\n";
-        return kCheckInterface;
+        return to_exit_code(kCheckInterface);
       }
       ports.push_back(p.get());
       owned.push_back(std::move(p));
@@ -73,6 +96,18 @@ int main(int argc, char** argv) {
       return std::chrono::duration_cast<std::chrono::microseconds>(clock::now() - t0).count();
     }, periods);
   }
-  std::cout << r.report;
-  return r.exit_code;
+  if (!c.quiet || r.exit_code != kCheckOk) std::cout << r.report;
+  return to_exit_code(r.exit_code);
+}
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const manip::Error& e) {
+    std::cerr << "manip_can_check: " << e.what() << "\n";
+    return e.exit_code();
+  } catch (const std::exception& e) {
+    std::cerr << "manip_can_check: internal error: " << e.what() << "\n";
+    return manip::exit_code::kInternal;
+  }
 }

@@ -16,6 +16,8 @@ PKGS=(
   chromium fonts-dejavu-core
   libmatio-dev
   python3-pygame xvfb xauth
+  # install/CPack (.deb dependencies by dpkg-shlibdeps) and the Java/MATLAB jar (docs/matlab.md)
+  dpkg-dev file default-jdk-headless liblcm-java
 )
 
 SUDO=""

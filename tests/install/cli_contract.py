@@ -1,0 +1,160 @@
+#!/usr/bin/env python3
+"""The CLI contract of one app (docs/cli.md), checked from outside.
+
+    cli_contract.py SOURCE_DIR APP_BINARY [--returns | --help-only]
+
+* `--help` exits 0 and prints "Exit codes (docs/exit-codes.md):" followed by
+  rows "  <code> <name>" whose names equal common/exit_codes' names for those
+  codes. The reference table is read independently of the binary, from
+  include/manip/common/exit_codes.hpp (constant -> number) and
+  src/common/exit_codes.cpp (constant -> name).
+* `--version` exits 0 and prints exactly "<app> <project version>".
+* `--help-only` (apps not yet on common/cli.hpp): `--help` exits 0 and every
+  "N  text" row it prints uses a code of the one table.
+* `--returns`: each documented code other than 70 (a bug) is produced by a
+  known bad (or good) invocation, so the table and the behaviour agree.
+"""
+import os
+import re
+import subprocess
+import sys
+import tempfile
+
+
+def reference_table(src):
+    hpp = open(os.path.join(src, "include/manip/common/exit_codes.hpp")).read()
+    cpp = open(os.path.join(src, "src/common/exit_codes.cpp")).read()
+    num = {k: int(v) for k, v in re.findall(r"inline constexpr int (k\w+) = (\d+);", hpp)}
+    names = {num[k]: v for k, v in re.findall(r'case (k\w+): return "([^"]*)";', cpp)}
+    if len(names) < 10:
+        raise SystemExit("could not read the exit-code table from the sources")
+    return names
+
+
+def project_version(src):
+    m = re.search(r"project\(manip VERSION (\S+)", open(os.path.join(src, "CMakeLists.txt")).read())
+    return m.group(1)
+
+
+def run(cmd, cwd):
+    return subprocess.run(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=300)
+
+
+def printed_table(help_text):
+    lines = help_text.splitlines()
+    try:
+        i = lines.index("Exit codes (docs/exit-codes.md):")
+    except ValueError:
+        return None
+    rows = {}
+    for line in lines[i + 1:]:
+        m = re.match(r"^\s+(\d+) (\S.*)$", line)
+        if not m:
+            break
+        rows[int(m.group(1))] = m.group(2)
+    return rows
+
+
+def returns_cases(app, src, tmp):
+    """code -> argv producing it (run in tmp). Only codes an app documents are used."""
+    bus = os.path.join(src, "tests/canopen/bus.yml")
+    bad_yaml = os.path.join(tmp, "bad.yaml")
+    with open(bad_yaml, "w") as f:
+        f.write("integration:\n  step_s: [1\n")
+    existing = os.path.join(tmp, "existing.out")
+    with open(existing, "w") as f:
+        f.write("keep\n")
+    cases = {
+        "manip_sim": {
+            0: ["--out", os.path.join(tmp, "s.lcm"), "--movements", "10", "--reps", "1", "-q"],
+            2: ["--noise", "loud"],
+            3: ["--human", "neuromech", "--config", bad_yaml, "--out", os.path.join(tmp, "n.lcm")],
+            6: ["--out", existing, "--movements", "10", "--reps", "1"],
+        },
+        "impedance_study": {
+            0: ["--sessions", "1", "--persons", "table1", "--noise", "none", "--methods", "paper", "-q",
+                "--out", os.path.join(tmp, "t.md")],
+            2: ["--persons", "table1,stif"],
+            6: ["--json", existing, "--sessions", "1"],
+        },
+        "manip_can_check": {
+            0: ["--config", bus, "--virtual", "--periods", "200", "-q"],
+            2: ["--periods", "nan"],
+            3: ["--config", os.path.join(tmp, "missing.yml"), "--virtual"],
+            8: ["--config", bus, "--virtual", "--virtual-fault", "never-boot", "--periods", "200"],
+        },
+        "manip_fake_drive": {
+            2: ["--mass-kg", "inf"],
+            # No such interface (on this kernel possibly no AF_CAN at all): the backend is unavailable.
+            8: ["--iface", "manipnosuchcan0", "--duration", "0.01", "-q"],
+        },
+    }
+    return cases.get(app, {})
+
+
+def main():
+    src, binary = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2])
+    check_returns = "--returns" in sys.argv[3:]
+    app = os.path.basename(binary)
+    ref = reference_table(src)
+    failures = []
+    if "--help-only" in sys.argv[3:]:
+        h = run([binary, "--help"], os.getcwd())
+        codes = [int(c) for c in re.findall(r"^\s+(\d+)\s+[a-zA-Z(]", h.stdout, re.M)]
+        if h.returncode != 0:
+            failures.append("--help exited %d" % h.returncode)
+        if not codes:
+            failures.append("--help prints no exit-code rows")
+        for c in codes:
+            if c not in ref:
+                failures.append("--help documents exit code %d, not in common/exit_codes" % c)
+        for f in failures:
+            print("FAIL %s: %s" % (app, f))
+        if not failures:
+            print("OK %s: --help exits 0, rows use codes %s of the one table" % (app, codes))
+        return 1 if failures else 0
+    with tempfile.TemporaryDirectory(prefix="manip_cli_%s_" % app) as tmp:
+        h = run([binary, "--help"], tmp)
+        if h.returncode != 0:
+            failures.append("--help exited %d" % h.returncode)
+        rows = printed_table(h.stdout)
+        if rows is None:
+            failures.append("--help prints no 'Exit codes (docs/exit-codes.md):' table")
+            rows = {}
+        for code, name in rows.items():
+            if ref.get(code) != name:
+                failures.append("--help row %d '%s' != common/exit_codes '%s'" % (code, name, ref.get(code)))
+        for must in (0, 2):
+            if rows and must not in rows:
+                failures.append("--help table lacks code %d" % must)
+        v = run([binary, "--version"], tmp)
+        want = "%s %s" % (app, project_version(src))
+        if v.returncode != 0 or v.stdout.strip() != want:
+            failures.append("--version: exit %d, printed %r (want %r)" % (v.returncode, v.stdout.strip(), want))
+        if check_returns:
+            cases = returns_cases(app, src, tmp)
+            if not cases:
+                failures.append("no return-code cases known for %s" % app)
+            for code, args in sorted(cases.items()):
+                if code not in rows:
+                    failures.append("case for code %d, which --help does not document" % code)
+                r = run([binary] + args, tmp)
+                if r.returncode != code:
+                    failures.append("%s -> exit %d, want %d (%s); stderr: %s" % (
+                        " ".join(args), r.returncode, code, ref.get(code), r.stderr.strip()[-300:]))
+                elif code != 0 and not (r.stderr.strip() or r.stdout.strip()):
+                    failures.append("%s -> exit %d without a message" % (" ".join(args), code))
+            undocumented = sorted(set(rows) - set(cases) - {0, 70})
+            if undocumented:
+                failures.append("documented codes without a case: %s" % undocumented)
+    for f in failures:
+        print("FAIL %s: %s" % (app, f))
+    if failures:
+        return 1
+    print("OK %s: --help table %s, --version '%s'%s" % (
+        app, sorted(rows), want, ", return codes checked" if check_returns else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

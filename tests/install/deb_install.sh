@@ -1,0 +1,65 @@
+#!/bin/sh
+# The .deb as a lab would install it (docs/install.md): build the installed
+# targets in the existing build tree, `cpack -G DEB`, check the declared
+# Debian dependencies, extract with `dpkg -x` into a clean prefix and run the
+# installed tools from another directory with a clean environment:
+#   manip_sim --human neuromech finds arm_model.yaml through the search path
+#   (<prefix>/share/manip/config; not the source tree), estimate_impedance
+#   estimates the session, Debian's python3 imports manipplot and the
+#   generated types from <prefix>/lib/python3/dist-packages.
+# Usage: deb_install.sh BUILD_DIR
+set -eu
+build=$(cd "$1" && pwd)
+work=$(mktemp -d /tmp/manip_deb_XXXXXX)
+trap 'rm -rf "$work"' EXIT
+t0=$(date +%s)
+
+targets="manip_sim_app estimate_impedance manip_rt impedance_study manip_can_check manip_fake_drive manip_lcmtypes_gen"
+grep -q '^MANIP_JAVA:BOOL=ON' "$build/CMakeCache.txt" && targets="$targets manip_lcmtypes_jar"
+cmake --build "$build" --target $targets -- -j2 > "$work/build.log" 2>&1 || { tail -30 "$work/build.log"; exit 1; }
+(cd "$work" && cpack -G DEB --config "$build/CPackConfig.cmake" -B "$work/pkg" > "$work/cpack.log" 2>&1) \
+  || { tail -30 "$work/cpack.log"; exit 1; }
+deb=$(ls "$work"/pkg/manip_*.deb)
+echo "package: $(basename "$deb") ($(du -k "$deb" | cut -f1) KiB, built in $(( $(date +%s) - t0 )) s)"
+
+depends=$(dpkg-deb -f "$deb" Depends)
+echo "Depends: $depends"
+for d in liblcm1 libyaml-cpp0.7 libstdc++6 libc6 python3-matplotlib python3-numpy; do
+  echo "$depends" | grep -q "$d" || { echo "FAIL: Depends lacks $d"; exit 1; }
+done
+
+root="$work/root"
+dpkg -x "$deb" "$root"
+for f in usr/bin/manip_sim usr/bin/estimate_impedance usr/bin/manip_rt usr/share/manip/config/rt.yaml \
+         usr/share/manip/config/arm_model.yaml usr/share/manip/lcmtypes/state_t.lcm \
+         usr/lib/python3/dist-packages/manipplot/__init__.py usr/lib/python3/dist-packages/manip/state_t.py \
+         usr/share/doc/manip/exit-codes.md; do
+  [ -e "$root/$f" ] || { echo "FAIL: package lacks /$f"; exit 1; }
+done
+if grep -q '^MANIP_JAVA:BOOL=ON' "$build/CMakeCache.txt"; then
+  [ -e "$root/usr/share/java/manip_lcmtypes.jar" ] || { echo "FAIL: package lacks the jar"; exit 1; }
+fi
+
+# Another directory, nothing of the build or source tree in the environment.
+mkdir -p "$work/elsewhere" "$work/home"
+cd "$work/elsewhere"
+run() { env -i PATH="$root/usr/bin:/usr/bin:/bin" HOME="$work/home" LANG=C.UTF-8 "$@"; }
+run manip_sim --version
+run manip_sim --human neuromech --movements 12 --reps 1 --seed 3 --out session.lcm
+[ -s session.lcm ] || { echo "FAIL: no session written"; exit 1; }
+run estimate_impedance session.lcm --json est.json > est.txt 2> est.err || rc=$?
+rc=${rc:-0}
+# 0 or 1 (a short session may exclude a trial): estimated; anything else is a failure.
+[ "$rc" -le 1 ] || { echo "FAIL: estimate_impedance exit $rc"; cat est.err; exit 1; }
+[ -s est.json ] || { echo "FAIL: no estimate written"; exit 1; }
+head -5 est.txt
+run /usr/bin/python3 -c "
+import sys
+sys.path.insert(0, '$root/usr/lib/python3/dist-packages')
+import manipplot, manipplot.io, manipplot.tables
+from manip import state_t, session_t
+assert manipplot.__file__.startswith('$root'), manipplot.__file__
+assert state_t.PHASE_PERTURBATION == 3
+print('python3: manipplot', manipplot.__version__, 'from', manipplot.__file__)
+"
+echo "install test: ok in $(( $(date +%s) - t0 )) s"
