@@ -9,9 +9,11 @@ cd "$here"
 scripts/setup.sh
 scripts/build.sh
 mkdir -p out
-./build/apps/manip_sim --out out/session.lcm --movements 100 --noise realistic --seed 1
+# out/ is this job's own output folder: rerunning the job replaces its files (--force).
+./build/apps/manip_sim --force --out out/session.lcm --movements 100 --noise realistic --seed 1
 set +e
-./build/apps/estimate_impedance out/session.lcm --method all --json out/estimate.json --csv out/estimate.csv --plots out/plots
+./build/apps/estimate_impedance out/session.lcm --method all --force --json out/estimate.json --csv out/estimate.csv \
+  --plots out/plots
 rc=$?
 set -e
 echo "main job: estimate_impedance exit code $rc (0 ok, 1 estimated with flags/excluded trials); results in out/" >&2

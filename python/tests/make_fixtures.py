@@ -49,7 +49,7 @@ def main(out):
         print("apps not built (%s, %s): build manip_sim_app and estimate_impedance" % (SIM, EST), file=sys.stderr)
         return 1
     sdir = os.path.join(out, "session")
-    s_cmds = [[SIM, "--out", os.path.join(sdir, "s.lcm"), "--movements", "40", "--seed", "3",
+    s_cmds = [[SIM, "--force", "--out", os.path.join(sdir, "s.lcm"), "--movements", "40", "--seed", "3",
                "--validate", os.path.join(sdir, "val")],
               [EST, os.path.join(sdir, "s.lcm"), "--method", "all", "--json", os.path.join(sdir, "s.json"),
                "--export-signals", os.path.join(sdir, "sig"), "-q"]]
@@ -63,7 +63,7 @@ def main(out):
     g_cmds = []
     for name, seed, person in GROUP:
         lcm = os.path.join(gdir, name + ".lcm")
-        g_cmds.append([SIM, "--out", lcm, "--movements", "40", "--seed", str(seed), "--person", person])
+        g_cmds.append([SIM, "--force", "--out", lcm, "--movements", "40", "--seed", str(seed), "--person", person])
         g_cmds.append([EST, lcm, "--method", "all", "--json", os.path.join(gdir, name + ".json"), "-q"])
 
     def make_group():
