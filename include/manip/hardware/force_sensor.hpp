@@ -1,0 +1,124 @@
+#pragma once
+// The handle force sensor behind the `can` backend: a source (the simulated
+// sensor of --can-virtual, ATI Net F/T over UDP) and the boundary every
+// source goes through once per control cycle:
+//   - bias (tare): the mean of the first `tare_samples` fresh samples after
+//     the session starts (enable()), hand resting on the handle; the reading
+//     is zero while the bias is taken;
+//   - saturation: |F| of an axis at or above the sensor's full scale is
+//     reported at full scale (the safety supervisor's sensor_saturation_n must
+//     not exceed it, checked at configure());
+//   - staleness: `stale_cycles` control cycles without a fresh sample, or a
+//     sensor-reported error, is a communication fault (backend_status
+//     kBackendError) and the force sequence stops advancing;
+//   - rotation: sensor frame -> workspace frame, counter-clockwise by
+//     rotation_deg (the sensor's x axis in workspace coordinates).
+// poll()/update() never allocate or block (sockets are non-blocking).
+#include <cstdint>
+#include <string>
+
+#include "manip/common/types.hpp"
+
+namespace manip::hardware {
+
+// One sensor sample in the sensor frame (forces only: the handle is planar).
+struct ForceSample {
+  Vec2 f_sensor_n{Vec2::Zero()};
+  std::uint64_t seq{0};   // the sensor's own sample counter (changes with every new sample)
+  bool error{false};      // the sensor reports a fault (Net F/T status word != 0)
+};
+
+class ForceSource {
+ public:
+  virtual ~ForceSource() = default;
+  // Set-up (slow, may fail): returns false with `error`.
+  virtual bool start(std::string& error) = 0;
+  // Real-time: newest sample received so far (true if a new one arrived).
+  virtual bool poll(ForceSample& latest) noexcept = 0;
+  virtual void stop() noexcept {}
+};
+
+struct ForceBoundaryParams {
+  bool tare{true};
+  std::uint32_t tare_samples{200};
+  double full_scale_n{200.0};
+  std::uint32_t stale_cycles{20};
+  double rotation_deg{0.0};
+};
+
+class ForceBoundary {
+ public:
+  explicit ForceBoundary(const ForceBoundaryParams& p);
+  // Restart the bias estimate (session start).
+  void begin_session();
+  struct Out {
+    Vec2 f_workspace_n{Vec2::Zero()};
+    std::uint64_t seq{0};     // advances with every fresh, usable sample
+    bool stale{false};        // no fresh sample for stale_cycles cycles, or sensor error
+    bool saturated{false};    // an axis at or above full scale this cycle
+    bool taring{false};
+  };
+  // Once per control cycle with the newest sample and whether it is new.
+  const Out& update(const ForceSample& s, bool fresh) noexcept;
+  [[nodiscard]] const Vec2& bias_n() const { return bias_n_; }
+  [[nodiscard]] const Out& last() const { return out_; }
+
+ private:
+  ForceBoundaryParams p_;
+  Mat2 rot_;
+  Vec2 bias_n_{Vec2::Zero()};
+  Vec2 bias_sum_n_{Vec2::Zero()};
+  std::uint32_t bias_n_samples_{0};
+  std::uint32_t since_fresh_{0};
+  Out out_{};
+};
+
+// ATI Net F/T, Raw Data Transfer (RDT) over UDP (ATI Net F/T manual, ch. 9):
+// request = 8 bytes big-endian {uint16 header 0x1234, uint16 command,
+// uint32 sample_count} (command 2 = start high-speed real-time streaming,
+// 0 = stop; count 0 = infinite); each record = 36 bytes big-endian
+// {uint32 rdt_sequence, uint32 ft_sequence, uint32 status, int32 Fx, Fy, Fz,
+// Tx, Ty, Tz} in counts; force [N] = counts / counts_per_force.
+struct RdtRecord {
+  std::uint32_t rdt_sequence{0};
+  std::uint32_t ft_sequence{0};
+  std::uint32_t status{0};
+  std::int32_t ft[6]{};
+};
+constexpr std::size_t kRdtRequestBytes = 8;
+constexpr std::size_t kRdtRecordBytes = 36;
+constexpr std::uint16_t kRdtHeader = 0x1234;
+constexpr std::uint16_t kRdtStartRealtime = 0x0002;
+constexpr std::uint16_t kRdtStop = 0x0000;
+void encode_rdt_request(std::uint16_t command, std::uint32_t count, std::uint8_t out[kRdtRequestBytes]);
+void encode_rdt_record(const RdtRecord& r, std::uint8_t out[kRdtRecordBytes]);
+bool decode_rdt_record(const std::uint8_t* data, std::size_t n, RdtRecord& out);
+
+class NetFtClient final : public ForceSource {
+ public:
+  NetFtClient(std::string address, std::uint16_t port, double counts_per_force);
+  ~NetFtClient() override;
+  NetFtClient(const NetFtClient&) = delete;
+  NetFtClient& operator=(const NetFtClient&) = delete;
+  bool start(std::string& error) override;  // socket, connect, start streaming
+  bool poll(ForceSample& latest) noexcept override;
+  void stop() noexcept override;             // stop streaming, close
+
+  // Counters (diagnostics and tests).
+  [[nodiscard]] std::uint64_t received() const { return received_; }
+  [[nodiscard]] std::uint64_t lost() const { return lost_; }   // gaps in rdt_sequence
+  [[nodiscard]] std::uint64_t late() const { return late_; }   // out-of-order (older) records, dropped
+  [[nodiscard]] std::uint64_t malformed() const { return malformed_; }
+
+ private:
+  std::string address_;
+  std::uint16_t port_;
+  double counts_per_force_;
+  int fd_{-1};
+  bool have_seq_{false};
+  std::uint32_t last_rdt_seq_{0};
+  ForceSample latest_{};
+  std::uint64_t received_{0}, lost_{0}, late_{0}, malformed_{0};
+};
+
+}  // namespace manip::hardware
