@@ -13,6 +13,7 @@ PKGS=(
   libreaderwriterqueue-dev
   python3 python3-venv python3-numpy python3-scipy python3-matplotlib
   rt-tests stress-ng iproute2
+  qemu-system-x86 busybox-static cpio xz-utils
 )
 
 SUDO=""
