@@ -183,10 +183,11 @@ int main(int argc, char** argv) {
     now = tick();
     if (now - due > loop_us) ++late;
     set.read(now);
-    if (cycles % 2 == 0) {  // drive ticks at the drive rate, like manip_rt
-      const double f = 2.0 * std::sin(2 * M_PI * 1.0 * double(now - w0_us) * 1e-6);
-      set.write(manip::Vec2(f, -f));
-    }
+    // write() every cycle: the master emits SYNC + RPDO when its SYNC period
+    // is due (manip_rt writes at the drive ticks, which coincide natively; in
+    // the emulated guest late cycles would otherwise halve the SYNC rate).
+    const double f = 2.0 * std::sin(2 * M_PI * 1.0 * double(now - w0_us) * 1e-6);
+    set.write(manip::Vec2(f, -f));
     ++cycles;
     if (set.faulted()) {
       faulted = true;
