@@ -161,7 +161,8 @@ void CanBackend::on_configure() {
   const cc::Error e = set_->configure([this] { return tick(); });
   if (e) fail("CANopen start-up failed (nothing enabled)", e);
 
-  if (!sensor_ && b.force_sensor == "netft")
+  // --can-virtual always uses the simulated sensor (a rehearsal has no real one).
+  if (!sensor_ && !virtual_ && b.force_sensor == "netft")
     sensor_ = std::make_unique<NetFtClient>(b.netft_address, static_cast<std::uint16_t>(b.netft_port),
                                             b.netft_counts_per_force);
   if (sensor_) {
@@ -265,7 +266,7 @@ void CanBackend::read(control::SensorReading& out) {
   bool fresh = false;
   if (sensor_) {
     fresh = sensor_->poll(sample);
-  } else if (virtual_ && can_.backend.force_sensor == "sim") {
+  } else if (virtual_) {
     // The simulated sensor reports in the workspace frame: express it in the
     // configured sensor frame so the boundary's rotation is exercised.
     const double a = -can_.backend.sensor_rotation_deg * std::numbers::pi / 180.0;

@@ -203,8 +203,23 @@ TEST_CASE("can backend: start-up failures are typed errors, nothing enabled", "[
   SECTION("sim force sensor without the virtual bus") {
     auto can = can_cfg();
     can.backend.virtual_bus = false;
+    can.backend.force_sensor = "sim";
     hw::CanBackend b(cfg, cfg.sim, can);
     CHECK_THROWS_AS(b.configure(), manip::ConfigError);
+  }
+  SECTION("SocketCAN interface missing (or no AF_CAN): exit 8 with the bus named") {
+    auto can = can_cfg();
+    can.backend.virtual_bus = false;
+    can.buses[0].interface = "nosuchcan7";
+    hw::CanBackend b(cfg, cfg.sim, can);
+    try {
+      b.configure();
+      FAIL("started without the interface");
+    } catch (const hw::BackendError& e) {
+      CHECK(std::string(e.what()).find("CAN bus 'bus_x' (nosuchcan7)") != std::string::npos);
+      CHECK(e.exit_code() == 8);
+    }
+    CHECK(b.state() == hw::BackendState::kUnconfigured);
   }
 }
 

@@ -42,8 +42,13 @@ TEST_CASE("manip_rt: exit codes of the executable", "[cli]") {
   CHECK(out.find("  8    backend unavailable") != std::string::npos);
   CHECK(out.find("  10   LCM bus") != std::string::npos);
   // --backend can over SocketCAN: no AF_CAN here, or no can0 on a machine with CAN support
-  CHECK(run("--backend can --log /tmp/never.lcm", &out) == 8);
-  CHECK(out.find("CAN bus 'bus_x' (can0)") != std::string::npos);
+  {
+    const std::string can_log =
+        (std::filesystem::temp_directory_path() / ("manip_rt_can_" + std::to_string(::getpid()) + ".lcm")).string();
+    CHECK(run("--backend can --force --log " + can_log, &out) == 8);
+    CHECK(out.find("CAN bus 'bus_x' (can0)") != std::string::npos);
+    std::filesystem::remove(can_log);  // the log is opened before the backend starts
+  }
   CHECK(run("--no-such-flag", &out) == 2);
   CHECK(run("--backend serial --log /tmp/never.lcm", &out) == 2);
   {

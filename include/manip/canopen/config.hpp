@@ -87,7 +87,7 @@ struct BackendOptions {
   // means the power stage lost its supply (STO / contactor of the e-stop chain).
   bool estop_on_voltage_loss = true;
   // Force sensor boundary.
-  std::string force_sensor = "sim";   // sim (virtual only) | netft | none
+  std::string force_sensor = "sim";   // sim | netft | none (virtual_bus always uses the simulated sensor)
   bool tare = true;                   // bias at session start (enable), hand resting on the handle
   uint32_t tare_samples = 200;        // averaged samples for the bias
   double force_full_scale_n = 200.0;  // sensor full scale per axis: |F| at or above -> saturated

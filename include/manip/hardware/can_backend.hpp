@@ -27,7 +27,8 @@
 // canopen::SimulatedDrive on a VirtualBus in the same process, in simulated
 // time; the stages and the person holding the handle are the sim backend's
 // plant (SimBackend: stage masses and friction of rt.yaml `sim:`, the
-// simulated person of sim.human, the simulated force sensor), driven by the
+// simulated person of sim.human, the simulated force sensor, used whatever
+// backend.force_sensor says), driven by the
 // force each simulated drive applies from its CAN target torque.
 #include <cstdint>
 #include <functional>
