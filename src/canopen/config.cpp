@@ -246,8 +246,8 @@ void read_backend(Reader& r, const YAML::Node& n, BackendOptions& b) {
     else if (k == "estop_on_voltage_loss") r.boolean(v, key, b.estop_on_voltage_loss);
     else if (k == "force_sensor") {
       r.text(v, key, b.force_sensor);
-      if (b.force_sensor != "sim" && b.force_sensor != "netft" && b.force_sensor != "none")
-        r.fail(v, key, "expected sim, netft or none");
+      if (b.force_sensor != "sim" && b.force_sensor != "netft" && b.force_sensor != "jr3" && b.force_sensor != "none")
+        r.fail(v, key, "expected sim, netft, jr3 or none");
     } else if (k == "tare") r.boolean(v, key, b.tare);
     else if (k == "tare_samples") r.integer(v, key, b.tare_samples, 1, 100000);
     else if (k == "force_full_scale_n") r.real(v, key, b.force_full_scale_n, 1.0, 1e5);
@@ -256,6 +256,8 @@ void read_backend(Reader& r, const YAML::Node& n, BackendOptions& b) {
     else if (k == "netft_address") r.text(v, key, b.netft_address);
     else if (k == "netft_port") r.integer(v, key, b.netft_port, 1, 65535);
     else if (k == "netft_counts_per_force") r.real(v, key, b.netft_counts_per_force, 1e-6, 1e12);
+    else if (k == "jr3_device") r.text(v, key, b.jr3_device);
+    else if (k == "jr3_filter") r.integer(v, key, b.jr3_filter, 0, 6);
     else r.fail(kv.first, key, "unknown key");
   }
 }

@@ -165,6 +165,8 @@ void CanBackend::on_configure() {
   if (!sensor_ && !virtual_ && b.force_sensor == "netft")
     sensor_ = std::make_unique<NetFtClient>(b.netft_address, static_cast<std::uint16_t>(b.netft_port),
                                             b.netft_counts_per_force);
+  if (!sensor_ && !virtual_ && b.force_sensor == "jr3")
+    sensor_ = std::make_unique<Jr3Source>(std::make_unique<Jr3PciDevice>(b.jr3_device), b.jr3_filter);
   if (sensor_) {
     std::string err;
     if (!sensor_->start(err)) fail("force sensor: " + err, cc::Error{cc::ErrorCode::OperatorStop});

@@ -173,3 +173,65 @@ void NetFtClient::stop() noexcept {
 }
 
 }  // namespace manip::hardware
+
+#include <fcntl.h>
+#include <sys/ioctl.h>
+
+namespace manip::hardware {
+
+namespace {
+// jr3pci-ioctl.h (magic 'k'): FILTER0..6 = 1..7, GET_FULL_SCALES = 9.
+unsigned long jr3_filter_request(int filter) {
+  return _IOR('k', 1 + filter, Jr3SixAxis);
+}
+constexpr unsigned long kJr3GetFullScales = _IOR('k', 9, Jr3FullScales);
+}  // namespace
+
+bool Jr3PciDevice::open(std::string& error) {
+  close();
+  fd_ = ::open(path_.c_str(), O_RDWR | O_CLOEXEC);
+  if (fd_ < 0) {
+    error = "JR3 " + path_ + ": " + std::strerror(errno) + " (jr3pci driver loaded? device node created?)";
+    return false;
+  }
+  return true;
+}
+
+bool Jr3PciDevice::full_scales(Jr3FullScales& out) { return fd_ >= 0 && ::ioctl(fd_, kJr3GetFullScales, &out) == 0; }
+
+bool Jr3PciDevice::read_filter(int filter, Jr3SixAxis& out) noexcept {
+  return fd_ >= 0 && filter >= 0 && filter <= 6 && ::ioctl(fd_, jr3_filter_request(filter), &out) == 0;
+}
+
+void Jr3PciDevice::close() noexcept {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+bool Jr3Source::start(std::string& error) {
+  if (filter_ < 0 || filter_ > 6) {
+    error = "JR3 filter " + std::to_string(filter_) + " (0..6)";
+    return false;
+  }
+  if (!dev_->open(error)) return false;
+  if (!dev_->full_scales(fs_) || fs_.f[0] <= 0 || fs_.f[1] <= 0) {
+    error = "JR3: full scales unreadable or zero (sensor not connected to the receiver?)";
+    dev_->close();
+    return false;
+  }
+  latest_ = ForceSample{};
+  return true;
+}
+
+bool Jr3Source::poll(ForceSample& latest) noexcept {
+  Jr3SixAxis s;
+  const bool ok = dev_->read_filter(filter_, s);
+  if (ok) {
+    latest_.f_sensor_n = Vec2(s.f[0] * fs_.f[0] / kJr3FullScaleCounts, s.f[1] * fs_.f[1] / kJr3FullScaleCounts);
+    ++latest_.seq;
+  }
+  latest = latest_;
+  return ok;
+}
+
+}  // namespace manip::hardware

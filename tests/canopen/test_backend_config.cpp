@@ -43,10 +43,10 @@ TEST_CASE("canopen config: backend section defaults and values", "[config]") {
 
 TEST_CASE("canopen config: backend section errors carry file, line and key", "[config]") {
   const std::string base = canopen_test::kTwoBuses;  // 31 lines
-  const auto e = errors_of(base + "backend:\n  virtul: true\n  estop_statusword_bit: 3\n  force_sensor: jr3\n");
+  const auto e = errors_of(base + "backend:\n  virtul: true\n  estop_statusword_bit: 3\n  force_sensor: jr5\n");
   CHECK(has(e, "bus.yml:33: backend.virtul: unknown key"));
   CHECK(has(e, "bus.yml:34: backend.estop_statusword_bit: must be -1 (not wired) or a manufacturer-specific statusword bit (8, 14, 15)"));
-  CHECK(has(e, "bus.yml:35: backend.force_sensor: expected sim, netft or none"));
+  CHECK(has(e, "bus.yml:35: backend.force_sensor: expected sim, netft, jr3 or none"));
 }
 
 TEST_CASE("canopen config: the shipped config/can.yaml is valid and fits its budget", "[config]") {

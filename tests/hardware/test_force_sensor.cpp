@@ -15,6 +15,8 @@
 
 #include "manip/hardware/force_sensor.hpp"
 
+#include <memory>
+
 namespace hw = manip::hardware;
 using manip::Vec2;
 
@@ -242,4 +244,88 @@ TEST_CASE("Net F/T client: bad address refused at start with a reason", "[force_
   std::string err;
   CHECK_FALSE(c.start(err));
   CHECK(err.find("not an IPv4 address") != std::string::npos);
+}
+
+namespace {
+// The jr3pci device layer, faked: scripted full scales and readings, failures on demand.
+struct FakeJr3 final : hw::Jr3Device {
+  bool opened{false}, fail_open{false}, fail_read{false};
+  hw::Jr3FullScales fs{};
+  hw::Jr3SixAxis next{};
+  int last_filter{-1};
+  bool open(std::string& error) override {
+    if (fail_open) error = "JR3 /dev/jr3: No such file or directory";
+    opened = !fail_open;
+    return opened;
+  }
+  bool full_scales(hw::Jr3FullScales& out) override {
+    out = fs;
+    return opened;
+  }
+  bool read_filter(int filter, hw::Jr3SixAxis& out) noexcept override {
+    last_filter = filter;
+    if (fail_read) return false;
+    out = next;
+    return true;
+  }
+};
+}  // namespace
+
+TEST_CASE("JR3 source: DSP counts scaled by full scale / 16384, failed reads are stale", "[force_sensor][jr3]") {
+  auto dev = std::make_unique<FakeJr3>();
+  FakeJr3* d = dev.get();
+  d->fs.f[0] = 100;  // N (67M25A-class full scales)
+  d->fs.f[1] = 200;
+  d->fs.f[2] = 200;
+  hw::Jr3Source src(std::move(dev), 1);
+  std::string err;
+  REQUIRE(src.start(err));
+  d->next.f[0] = 8192;    // half of full scale
+  d->next.f[1] = -4096;   // -1/4
+  hw::ForceSample s;
+  REQUIRE(src.poll(s));
+  CHECK(d->last_filter == 1);
+  CHECK(s.f_sensor_n[0] == Approx(50.0));
+  CHECK(s.f_sensor_n[1] == Approx(-50.0));
+  CHECK(s.seq == 1);
+  hw::ForceBoundaryParams p;
+  p.tare = false;
+  p.stale_cycles = 3;
+  hw::ForceBoundary b(p);
+  CHECK_FALSE(b.update(s, true).stale);
+  d->fail_read = true;
+  bool stale = false;
+  for (int i = 0; i < 3; ++i) {
+    const bool fresh = src.poll(s);
+    CHECK_FALSE(fresh);
+    stale = b.update(s, fresh).stale;
+  }
+  CHECK(stale);
+  CHECK(s.seq == 1);
+}
+
+TEST_CASE("JR3 source: start fails with a reason (no device, zero full scales, bad filter)", "[force_sensor][jr3]") {
+  std::string err;
+  {
+    auto dev = std::make_unique<FakeJr3>();
+    dev->fail_open = true;
+    hw::Jr3Source src(std::move(dev), 0);
+    CHECK_FALSE(src.start(err));
+    CHECK(err.find("/dev/jr3") != std::string::npos);
+  }
+  {
+    hw::Jr3Source src(std::make_unique<FakeJr3>(), 0);  // full scales 0: sensor not connected
+    CHECK_FALSE(src.start(err));
+    CHECK(err.find("full scales") != std::string::npos);
+  }
+  {
+    hw::Jr3Source src(std::make_unique<FakeJr3>(), 7);
+    CHECK_FALSE(src.start(err));
+    CHECK(err.find("filter 7") != std::string::npos);
+  }
+  {
+    hw::Jr3PciDevice real("/nonexistent/jr3");
+    CHECK_FALSE(real.open(err));
+    CHECK(err.find("jr3pci driver") != std::string::npos);
+  }
 }

@@ -87,7 +87,7 @@ struct BackendOptions {
   // means the power stage lost its supply (STO / contactor of the e-stop chain).
   bool estop_on_voltage_loss = true;
   // Force sensor boundary.
-  std::string force_sensor = "sim";   // sim | netft | none (virtual_bus always uses the simulated sensor)
+  std::string force_sensor = "sim";   // sim | netft | jr3 | none (virtual_bus always uses the simulated sensor)
   bool tare = true;                   // bias at session start (enable), hand resting on the handle
   uint32_t tare_samples = 200;        // averaged samples for the bias
   double force_full_scale_n = 200.0;  // sensor full scale per axis: |F| at or above -> saturated
@@ -96,6 +96,8 @@ struct BackendOptions {
   std::string netft_address = "192.168.1.1";
   uint32_t netft_port = 49152;        // ATI RDT UDP port
   double netft_counts_per_force = 1000000.0;  // Net F/T "counts per force" (its web page / calibration)
+  std::string jr3_device = "/dev/jr3";  // jr3pci driver character device
+  int jr3_filter = 1;                   // JR3 DSP filter 0..6 (0 = raw)
 };
 
 struct CanConfig {

@@ -15,6 +15,7 @@
 //     rotation_deg (the sensor's x axis in workspace coordinates).
 // poll()/update() never allocate or block (sockets are non-blocking).
 #include <cstdint>
+#include <memory>
 #include <string>
 
 #include "manip/common/types.hpp"
@@ -119,6 +120,72 @@ class NetFtClient final : public ForceSource {
   std::uint32_t last_rdt_seq_{0};
   ForceSample latest_{};
   std::uint64_t received_{0}, lost_{0}, late_{0}, malformed_{0};
+};
+
+}  // namespace manip::hardware
+
+namespace manip::hardware {
+
+// JR3 6-axis sensor on its PCI receiver, through the Linux `jr3pci` driver's
+// character device (/dev/jr3, one per channel): ioctl magic 'k',
+//   IOCTL0_JR3_FILTER0..6 = _IOR('k', 1..7, six_axis_array{int f[3]; int m[3]})
+//   IOCTL0_JR3_ZEROOFFS   = _IO('k', 8)
+//   IOCTL0_JR3_GET_FULL_SCALES = _IOR('k', 9, force_array{int f[3]; int m[3]; int v[2]})
+// Values are in DSP units: force [N] = value * full_scale / 16384 (the JR3
+// DSP's full-scale count; full scales in N, moments in N dm per the sensor's
+// calibration). The driver offers no sample counter: a successful read is a
+// fresh sample, a failed ioctl is not (the boundary turns that into staleness).
+struct Jr3SixAxis {
+  std::int32_t f[3]{};
+  std::int32_t m[3]{};
+};
+struct Jr3FullScales {
+  std::int32_t f[3]{};
+  std::int32_t m[3]{};
+  std::int32_t v[2]{};
+};
+constexpr double kJr3FullScaleCounts = 16384.0;
+
+// The device layer (real: Jr3PciDevice; tests: a fake).
+class Jr3Device {
+ public:
+  virtual ~Jr3Device() = default;
+  virtual bool open(std::string& error) = 0;
+  virtual bool full_scales(Jr3FullScales& out) = 0;
+  virtual bool read_filter(int filter, Jr3SixAxis& out) noexcept = 0;  // filter 0 (unfiltered) .. 6
+  virtual void close() noexcept {}
+};
+
+class Jr3PciDevice final : public Jr3Device {
+ public:
+  explicit Jr3PciDevice(std::string path = "/dev/jr3") : path_(std::move(path)) {}
+  ~Jr3PciDevice() override { close(); }
+  Jr3PciDevice(const Jr3PciDevice&) = delete;
+  Jr3PciDevice& operator=(const Jr3PciDevice&) = delete;
+  bool open(std::string& error) override;
+  bool full_scales(Jr3FullScales& out) override;
+  bool read_filter(int filter, Jr3SixAxis& out) noexcept override;
+  void close() noexcept override;
+
+ private:
+  std::string path_;
+  int fd_{-1};
+};
+
+class Jr3Source final : public ForceSource {
+ public:
+  // filter: the DSP's low-pass filter number (0 = raw, 1 = 500 Hz, 2 = 125 Hz, ...).
+  Jr3Source(std::unique_ptr<Jr3Device> dev, int filter) : dev_(std::move(dev)), filter_(filter) {}
+  bool start(std::string& error) override;
+  bool poll(ForceSample& latest) noexcept override;
+  void stop() noexcept override { dev_->close(); }
+  [[nodiscard]] const Jr3FullScales& scales() const { return fs_; }
+
+ private:
+  std::unique_ptr<Jr3Device> dev_;
+  int filter_;
+  Jr3FullScales fs_{};
+  ForceSample latest_{};
 };
 
 }  // namespace manip::hardware
