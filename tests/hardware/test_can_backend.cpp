@@ -377,3 +377,76 @@ TEST_CASE("manip_rt --backend can --can-virtual completes a protocol that estima
   CHECK((sc->k_npm - ss->k_npm).norm() < 0.20 * k_true.norm());
   CHECK((sc->d_nspm - ss->d_nspm).norm() < 0.20 * d_true.norm());
 }
+
+// Through run_session (controller, supervisor, logger): a fault injected into
+// a simulated drive mid-session ends the session with the supervisor's
+// backend / hardware_estop fault, the drives safe, the reason latched.
+#include "offline_run.hpp"
+#include "manip/runtime/session.hpp"
+
+namespace {
+class Injecting final : public hw::Backend {
+ public:
+  Injecting(hw::CanBackend& in, std::int64_t at, std::function<void(hw::CanBackend&)> inject)
+      : in_(in), at_(at), inject_(std::move(inject)) {}
+  [[nodiscard]] std::string name() const override { return "can"; }
+  [[nodiscard]] bool supports_as_fast_as_possible() const override { return true; }
+  void read(manip::control::SensorReading& out) override {
+    if (++n_ == at_) inject_(in_);
+    in_.read(out);
+    if (out.status & (bs::kDriveFault | bs::kBackendError | bs::kHwEStopOpen) && first_fault_ < 0) first_fault_ = n_;
+  }
+  void write(const manip::control::ActuatorCommand& c) override { in_.write(c); }
+  void display(const manip::control::DisplayCue& c) override { in_.display(c); }
+  std::int64_t first_fault_{-1};
+
+ private:
+  void on_configure() override { in_.configure(); }
+  void on_enable() override { in_.enable(); }
+  void on_disable() noexcept override { in_.disable(); }
+  void on_shutdown() noexcept override { in_.shutdown(); }
+  hw::CanBackend& in_;
+  std::int64_t n_{0}, at_;
+  std::function<void(hw::CanBackend&)> inject_;
+};
+}  // namespace
+
+TEST_CASE("can backend in run_session: a drive fault mid-session ends it with the backend fault", "[can_backend][session]") {
+  const auto base = rt_cfg();
+  const auto cfg = manip::runtime::load_rt_config(kSrc + "/config/rt.yaml", manip::runtime::trials_overrides(base, 2));
+  auto can = can_cfg();
+  can.backend.estop_statusword_bit = 14;
+  std::uint32_t want = 0;
+  std::string word;
+  std::function<void(hw::CanBackend&)> inject;
+  SECTION("drive Fault") {
+    inject = [](hw::CanBackend& b) { b.sim_drive(1)->enter_fault(0x2310, 0); };
+    want = manip::control::fault::kBackend;
+    word = "Fault";
+  }
+  SECTION("heartbeat loss") {
+    inject = [](hw::CanBackend& b) { b.sim_drive(0)->faults().heartbeat_stopped = true; };
+    want = manip::control::fault::kBackend;
+    word = "heartbeat";
+  }
+  SECTION("e-stop chain") {
+    inject = [](hw::CanBackend& b) { b.sim_drive(0)->faults().statusword_extra = 1u << 14; };
+    want = manip::control::fault::kHardwareEStop;
+    word = "e-stop";
+  }
+  hw::CanBackend can_b(cfg, cfg.sim, can);
+  Injecting b(can_b, 8000, inject);  // 2 s into the session
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("manip_can_fault_" + std::to_string(::getpid()) + ".lcm")).string();
+  auto opt = offline_run_options(path);
+  opt.exit_on_fault = true;
+  std::ostringstream out;
+  const auto rep = manip::runtime::run_session(cfg, b, opt, out);
+  std::filesystem::remove(path);
+  INFO(out.str());
+  CHECK(rep.exit_code == 7);
+  CHECK((rep.fault_flags & want) != 0);
+  CHECK(can_b.fault_reason().find(word) != std::string::npos);
+  REQUIRE(b.first_fault_ > 0);
+  for (int a = 0; a < 2; ++a) CHECK(can_b.sim_drive(a)->applied_force_n() == 0.0);
+}
