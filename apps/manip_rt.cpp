@@ -8,6 +8,7 @@
 
 #include "manip/common/errors.hpp"
 #include "manip/common/exit_codes.hpp"
+#include "manip/hardware/can_backend.hpp"
 #include "manip/runtime/backends.hpp"
 #include "manip/runtime/config.hpp"
 #include "manip/runtime/session.hpp"
@@ -49,7 +50,7 @@ const char* kExitCodes =
     "       or writing failed (e.g. disk full)\n"
     "  7    session ended by a safety fault (unattended runs, --exit-on-fault), or reached\n"
     "       --duration or its end with a fault still latched\n"
-    "  8    backend unavailable or failed to start (--backend can: not implemented yet)\n"
+    "  8    backend unavailable or failed to start (CAN interface, drive start-up, bus budget)\n"
     "  9    --require-rt: no PREEMPT_RT kernel, no real-time privileges, or the loop thread\n"
     "       could not get SCHED_FIFO/mlock (checked before the first cycle)\n"
     "  10   LCM bus cannot be created with the URL (--lcm-url none runs without it)\n"
@@ -69,7 +70,11 @@ int main(int argc, char** argv) {
   double duration = 0.0;
   int trials = 0;
   long long seed = -1;
-  app.add_option("--backend", backend, "sim | can (can: refused until the CANopen issue)")->capture_default_str();
+  app.add_option("--backend", backend, "sim | can (CANopen CiA 402 drives, docs/hardware.md)")->capture_default_str();
+  std::string can_config = "config/can.yaml";
+  bool can_virtual = false;
+  app.add_option("--can-config", can_config, "--backend can: CANopen bus configuration")->capture_default_str();
+  app.add_flag("--can-virtual", can_virtual, "--backend can: simulated drives on an in-process virtual bus");
   app.add_option("--config", config, "configuration YAML")->capture_default_str();
   app.add_option("--log", log, "LCM log file to write (default: manip_rt-<session_id>-<UTC time>.lcm)");
   app.add_flag("--force", force, "overwrite an existing log file");
@@ -118,7 +123,14 @@ int main(int argc, char** argv) {
     }
 
     if (backend == "can" && !afap) realtime = true;
-    const std::unique_ptr<manip::hardware::Backend> hw_backend = rt::make_backend(backend, cfg);
+    std::unique_ptr<manip::hardware::Backend> hw_backend;
+    if (backend == "can") {
+      auto can = manip::hardware::load_can_config(can_config);
+      if (can_virtual) can.backend.virtual_bus = true;
+      hw_backend = std::make_unique<manip::hardware::CanBackend>(cfg, cfg.sim, can);
+    } else {
+      hw_backend = rt::make_backend(backend, cfg);
+    }
     if (log.empty()) {
       char ts[32];
       const std::time_t now = std::time(nullptr);

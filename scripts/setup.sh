@@ -18,6 +18,7 @@ PKGS=(
   python3-pygame xvfb xauth
   # install/CPack (.deb dependencies by dpkg-shlibdeps) and the Java/MATLAB jar (docs/matlab.md)
   dpkg-dev file default-jdk-headless liblcm-java
+  qemu-system-x86 busybox-static cpio xz-utils
 )
 
 SUDO=""

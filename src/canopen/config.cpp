@@ -230,6 +230,38 @@ void read_drive(Reader& r, const YAML::Node& n, const std::string& prefix, Drive
   }
 }
 
+void read_backend(Reader& r, const YAML::Node& n, BackendOptions& b) {
+  if (!n.IsMap()) return r.fail(n, "backend", "expected a mapping");
+  for (const auto& kv : n) {
+    const std::string k = kv.first.as<std::string>();
+    const YAML::Node& v = kv.second;
+    const std::string key = "backend." + k;
+    if (k == "virtual") r.boolean(v, key, b.virtual_bus);
+    else if (k == "estop_statusword_bit") {
+      r.integer(v, key, b.estop_statusword_bit, -1, 15);
+      const int bit = b.estop_statusword_bit;
+      if (bit >= 0 && bit != 8 && bit != 14 && bit != 15)
+        r.fail(v, key, "must be -1 (not wired) or a manufacturer-specific statusword bit (8, 14, 15)");
+    } else if (k == "estop_active_high") r.boolean(v, key, b.estop_active_high);
+    else if (k == "estop_on_voltage_loss") r.boolean(v, key, b.estop_on_voltage_loss);
+    else if (k == "force_sensor") {
+      r.text(v, key, b.force_sensor);
+      if (b.force_sensor != "sim" && b.force_sensor != "netft" && b.force_sensor != "jr3" && b.force_sensor != "none")
+        r.fail(v, key, "expected sim, netft, jr3 or none");
+    } else if (k == "tare") r.boolean(v, key, b.tare);
+    else if (k == "tare_samples") r.integer(v, key, b.tare_samples, 1, 100000);
+    else if (k == "force_full_scale_n") r.real(v, key, b.force_full_scale_n, 1.0, 1e5);
+    else if (k == "force_stale_cycles") r.integer(v, key, b.force_stale_cycles, 1, 100000);
+    else if (k == "sensor_rotation_deg") r.real(v, key, b.sensor_rotation_deg, -360.0, 360.0);
+    else if (k == "netft_address") r.text(v, key, b.netft_address);
+    else if (k == "netft_port") r.integer(v, key, b.netft_port, 1, 65535);
+    else if (k == "netft_counts_per_force") r.real(v, key, b.netft_counts_per_force, 1e-6, 1e12);
+    else if (k == "jr3_device") r.text(v, key, b.jr3_device);
+    else if (k == "jr3_filter") r.integer(v, key, b.jr3_filter, 0, 6);
+    else r.fail(kv.first, key, "unknown key");
+  }
+}
+
 }  // namespace
 
 bool parse_config(const std::string& text, const std::string& source, CanConfig& out,
@@ -261,7 +293,8 @@ bool parse_config(const std::string& text, const std::string& source, CanConfig&
     else if (k == "defaults") read_drive(r, kv.second, "defaults", defaults, true);
     else if (k == "buses") buses = kv.second;
     else if (k == "nodes") nodes = kv.second;
-    else r.fail(kv.first, k, "unknown key (allowed: master, buses, defaults, nodes)");
+    else if (k == "backend") read_backend(r, kv.second, cfg.backend);
+    else r.fail(kv.first, k, "unknown key (allowed: master, buses, defaults, nodes, backend)");
   }
   if (!buses || !buses.IsMap() || buses.size() == 0) {
     r.fail(buses ? buses : root, "buses", "required: a mapping of bus name -> {interface, bitrate}");

@@ -104,7 +104,7 @@ uint16_t SimulatedDrive::statusword() const {
       state_ != cia402::State::FaultReactionActive && state_ != cia402::State::NotReadyToSwitchOn &&
       state_ != cia402::State::SwitchOnDisabled)
     s |= cia402::sw::kQuickStop;
-  return s;
+  return static_cast<uint16_t>(s | faults_.statusword_extra);
 }
 
 uint32_t SimulatedDrive::live_value(uint16_t index) const {
@@ -283,6 +283,7 @@ void SimulatedDrive::integrate(double dt) {
   const bool on = state_ == cia402::State::OperationEnabled && nmt_ == NmtState::Operational && powered_;
   const double motor = on ? target_torque_ / 1000.0 * p_.rated_current_a * p_.force_constant_n_per_a : 0.0;
   applied_force_n_ = motor;
+  if (p_.external_plant) return;  // the stage is integrated by the caller (set_plant_state)
   const double f = motor + external_force_n_;
   double remaining = dt;
   while (remaining > 0) {

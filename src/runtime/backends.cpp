@@ -1,5 +1,6 @@
 #include "manip/runtime/backends.hpp"
 
+#include "manip/hardware/can_backend.hpp"
 #include "manip/hardware/sim_backend.hpp"
 
 namespace manip::runtime {
@@ -14,10 +15,7 @@ std::unique_ptr<hardware::Backend> make_backend(const std::string& name, const R
       throw ConfigError(std::string("sim backend: ") + e.what());
     }
   }
-  if (name == "can")
-    throw hardware::BackendError(
-        "backend 'can' (CANopen CiA 402 drives over SocketCAN) is not implemented yet (a later issue); "
-        "refusing to start. Use --backend sim.");
+  if (name == "can") return std::make_unique<hardware::CanBackend>(cfg, cfg.sim, hardware::load_can_config("config/can.yaml"));
   throw UsageError("unknown backend '" + name + "' (choose sim or can)");
 }
 

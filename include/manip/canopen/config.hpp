@@ -74,8 +74,35 @@ struct DriveConfig {
   double rated_force_n() const { return rated_current_a * force_constant_n_per_a; }
 };
 
+// The `backend:` section: what the `can` hardware backend of manip_rt adds
+// around the drives (safety inputs, force sensor, in-process simulation).
+struct BackendOptions {
+  bool virtual_bus = false;           // run simulated drives in-process (VirtualBus), no SocketCAN
+  // Safety inputs read from each drive's statusword every cycle (docs/hardware.md):
+  // the e-stop chain / STO status on a manufacturer-specific 0x6041 bit
+  // (8, 14 or 15; -1 = not wired) and its level when the chain is open.
+  int estop_statusword_bit = -1;
+  bool estop_active_high = true;
+  // CiA 402 0x6041 bit 4 "voltage enabled" dropping while Operation enabled
+  // means the power stage lost its supply (STO / contactor of the e-stop chain).
+  bool estop_on_voltage_loss = true;
+  // Force sensor boundary.
+  std::string force_sensor = "sim";   // sim | netft | jr3 | none (virtual_bus always uses the simulated sensor)
+  bool tare = true;                   // bias at session start (enable), hand resting on the handle
+  uint32_t tare_samples = 200;        // averaged samples for the bias
+  double force_full_scale_n = 200.0;  // sensor full scale per axis: |F| at or above -> saturated
+  uint32_t force_stale_cycles = 20;   // control cycles without a new sample -> stale (comm error)
+  double sensor_rotation_deg = 0.0;   // sensor x axis -> workspace x1, counter-clockwise
+  std::string netft_address = "192.168.1.1";
+  uint32_t netft_port = 49152;        // ATI RDT UDP port
+  double netft_counts_per_force = 1000000.0;  // Net F/T "counts per force" (its web page / calibration)
+  std::string jr3_device = "/dev/jr3";  // jr3pci driver character device
+  int jr3_filter = 1;                   // JR3 DSP filter 0..6 (0 = raw)
+};
+
 struct CanConfig {
   MasterConfig master;
+  BackendOptions backend;
   std::vector<BusConfig> buses;
   std::vector<DriveConfig> drives;
   std::string source = "<string>";

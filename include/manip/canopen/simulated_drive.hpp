@@ -36,6 +36,11 @@ struct SimDriveParams {
   uint32_t sync_loss_limit = 2;       // fault after this many missed SYNC periods (Copley-like)
   int64_t boot_delay_us = 20000;      // power-on / reset node to boot-up message
   bool has_event_status = true;       // Copley 0x1002 manufacturer status register
+  // The stage is simulated outside the drive (the `can --can-virtual` backend
+  // couples both stages to a simulated person): the drive only turns its
+  // target torque into applied_force_n() and reports the position/velocity
+  // given by set_plant_state() in 0x6064/0x606C.
+  bool external_plant = false;
 };
 
 struct SimFaults {
@@ -49,6 +54,7 @@ struct SimFaults {
   uint8_t reject_sub = 0;
   uint32_t reject_abort = 0;        // ...with this abort code
   uint8_t answer_as_node = 0;       // answer SDOs with this node id (0 = own id)
+  uint16_t statusword_extra = 0;    // bits ORed into 0x6041 (e.g. a manufacturer-specific STO bit)
 };
 
 class SimulatedDrive {
@@ -64,6 +70,11 @@ class SimulatedDrive {
   void enter_fault(uint16_t emcy_code, uint32_t event_status);
   void power_cycle(int64_t now_us, int64_t off_us);  // e-stop: power off, later boot
   void set_external_force(double f_n) { external_force_n_ = f_n; }
+  // external_plant only: the stage state the encoder reports (drive axis, SI).
+  void set_plant_state(double position_m, double velocity_mps) {
+    position_m_ = position_m;
+    velocity_mps_ = velocity_mps;
+  }
 
   // Observation (tests and the fake-drive program).
   uint8_t node_id() const { return p_.node_id; }

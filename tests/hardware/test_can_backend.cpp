@@ -1,0 +1,452 @@
+// The `can` backend (include/manip/hardware/can_backend.hpp) against simulated
+// CiA 402 drives on the in-process virtual bus: lifecycle, unit/axis mapping,
+// the bus-budget refusal, start-up failures, faults mid-session (safe state
+// within one control cycle, latched reason), safety inputs, the real-time path
+// without allocation, and manip_rt --backend can --can-virtual completing a
+// protocol whose log estimates like the sim backend's.
+#include <catch2/catch.hpp>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "alloc_counter.hpp"
+#include "sanitized.hpp"
+
+#include "manip/canopen/error.hpp"
+#include "manip/estimation/session_estimator.hpp"
+#include "manip/hardware/can_backend.hpp"
+#include "manip/runtime/config.hpp"
+
+namespace hw = manip::hardware;
+namespace cc = manip::canopen;
+namespace bs = manip::control::backend_status;
+using manip::Vec2;
+
+namespace {
+
+const std::string kSrc = MANIP_SOURCE_DIR;
+
+manip::runtime::RtConfig rt_cfg() { return manip::runtime::load_rt_config(kSrc + "/config/rt.yaml"); }
+
+cc::CanConfig can_cfg() {
+  std::ifstream in(kSrc + "/config/can.yaml");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string text = ss.str();
+  // the shipped file with virtual: true (what --can-virtual does)
+  const auto at = text.find("  virtual: false");
+  REQUIRE(at != std::string::npos);
+  text.replace(at, 16, "  virtual: true");
+  cc::CanConfig c;
+  std::vector<std::string> errors;
+  const bool ok = cc::parse_config(text, "can.yaml", c, errors);
+  INFO((errors.empty() ? std::string() : errors.front()));
+  REQUIRE(ok);
+  return c;
+}
+
+// The loop's side, without the controller: read, then at drive ticks write.
+struct Loop {
+  hw::CanBackend& b;
+  manip::control::SensorReading r{};
+  std::int64_t k{0};
+  void cycle(const Vec2& f = Vec2::Zero()) {
+    b.read(r);
+    manip::control::ActuatorCommand c;
+    c.f_motor_n = f;
+    c.enable = true;
+    c.send = (k % 2) == 0;  // 2 kHz drive ticks of the 4 kHz loop
+    if (c.send) b.write(c);
+    ++k;
+  }
+  // Cycles until a status bit in `mask` is raised; -1 if not within max.
+  int until(std::uint32_t mask, int max) {
+    for (int i = 1; i <= max; ++i) {
+      cycle();
+      if (r.status & mask) return i;
+    }
+    return -1;
+  }
+};
+
+void started(hw::CanBackend& b) {
+  b.configure();
+  b.enable();
+  REQUIRE(b.state() == hw::BackendState::kActive);
+}
+
+// The safe state: the detecting read() raised the status bit (the controller
+// commands zero force in the same cycle) and sent Disable voltage + zero
+// torque + SYNC on every bus (canopen tests: check_safe_state_after_fault);
+// the drives act on it once it is off the wire, behind their own TPDOs (up to
+// ~360 us at 1 Mbit/s): within one SYNC period (two 4 kHz cycles) neither
+// simulated drive is in Operation enabled or applies force.
+void check_safe_next_cycle(Loop& l) {
+  l.cycle();
+  l.cycle();
+  for (int a = 0; a < 2; ++a) {
+    INFO("axis " << a);
+    CHECK(l.b.sim_drive(a)->state() != cc::cia402::State::OperationEnabled);
+    CHECK(l.b.sim_drive(a)->applied_force_n() == 0.0);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("can backend (virtual): configure leaves drives disabled, enable reaches Operation enabled", "[can_backend]") {
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  b.configure();
+  REQUIRE(b.state() == hw::BackendState::kInactive);
+  CHECK(b.budget_text().find("bus_x") != std::string::npos);
+  for (int a = 0; a < 2; ++a) {
+    CHECK(b.sim_drive(a)->nmt_state() == cc::NmtState::Operational);
+    CHECK(b.sim_drive(a)->state() != cc::cia402::State::OperationEnabled);
+    // the start-up wrote the heartbeat consumer 0x1016:01 = master node << 16 | ms
+    CHECK(b.sim_drive(a)->od_value(0x1016, 1) == ((127u << 16) | 100u));
+    CHECK(b.sim_drive(a)->od_value(0x6060, 0) == 10u);  // CST
+  }
+  b.enable();
+  for (int a = 0; a < 2; ++a) {
+    CHECK(b.sim_drive(a)->state() == cc::cia402::State::OperationEnabled);
+    CHECK(b.sim_drive(a)->target_torque_permille() == 0);
+  }
+  Loop l{b};
+  l.cycle();
+  CHECK((l.r.status & bs::kDrivesEnabled) != 0);
+  CHECK((l.r.status & (bs::kDriveFault | bs::kBackendError | bs::kHwEStopOpen)) == 0);
+  b.disable();
+  CHECK(b.sim_drive(0)->state() != cc::cia402::State::OperationEnabled);
+  b.shutdown();
+  CHECK(b.state() == hw::BackendState::kFinalized);
+  CHECK(b.fault_reason().empty());
+}
+
+TEST_CASE("can backend (virtual): positions, velocities and forces mapped with units and signs", "[can_backend]") {
+  const auto cfg = rt_cfg();
+  auto can = can_cfg();
+  can.drives[1].sign = -1;  // axis 2's drive counts the other way
+  hw::CanBackend b(cfg, cfg.sim, can);
+  started(b);
+  Loop l{b};
+  const Vec2 f_cmd(30.0, -20.0);
+  for (int i = 0; i < 400; ++i) l.cycle(f_cmd);  // 100 ms
+  // encoder counts -> workspace metres: the plant's true position within a
+  // count (1 um) plus the motion during the TPDO latency (<= 2 cycles)
+  const Vec2 x_true = b.plant()->true_position_workspace_m();
+  const Vec2 v_true = b.plant()->true_velocity_workspace_mps();
+  for (int a = 0; a < 2; ++a) {
+    INFO("axis " << a);
+    CHECK(std::abs(l.r.x_workspace_m[a] - x_true[a]) < 1e-6 + 2 * 250e-6 * std::abs(v_true[a]) + 1e-9);
+    CHECK(std::abs(l.r.xd_workspace_mps[a] - v_true[a]) < 0.02 * std::abs(v_true[a]) + 1e-4);
+    // N -> per mille (200 N rated, 0.2 N per count) -> N on the stage, sign restored
+    CHECK(b.plant()->applied_force_n()[a] == Approx(f_cmd[a]).margin(0.1));
+  }
+  // the drive of axis 2 saw the negated torque
+  CHECK(b.sim_drive(1)->target_torque_permille() == 100);  // -(-20 N) / 200 N * 1000
+  CHECK(b.sim_drive(0)->target_torque_permille() == 150);
+  CHECK(l.r.x_workspace_m[1] - b.plant()->true_position_workspace_m()[1] < 1e-3);
+}
+
+TEST_CASE("can backend: an over-budget configuration is refused at configure with the budget", "[can_backend]") {
+  const auto cfg = rt_cfg();
+  auto can = can_cfg();
+  can.master.max_bus_load = 0.60;  // the shipped mapping needs 73.6 % worst case
+  hw::CanBackend b(cfg, cfg.sim, can);
+  try {
+    b.configure();
+    FAIL("over-budget configuration accepted");
+  } catch (const hw::BackendError& e) {
+    const std::string w = e.what();
+    CHECK(e.exit_code() == 8);
+    CHECK(w.find("max_bus_load") != std::string::npos);
+    CHECK(w.find("bus_x") != std::string::npos);  // the budget table
+  }
+  CHECK(b.state() == hw::BackendState::kUnconfigured);
+}
+
+TEST_CASE("can backend: start-up failures are typed errors, nothing enabled", "[can_backend]") {
+  const auto cfg = rt_cfg();
+  SECTION("SDO abort on the PDO mapping") {
+    hw::CanBackend b(cfg, cfg.sim, can_cfg());
+    cc::SimulatedDrive* d = nullptr;
+    b.before_startup = [&](cc::VirtualRig& rig) {
+      d = &rig.drive(0);
+      d->faults().reject_index = 0x1600;
+      d->faults().reject_sub = 1;
+      d->faults().reject_abort = 0x06040041;  // object cannot be mapped
+    };
+    try {
+      b.configure();
+      FAIL("start-up did not fail");
+    } catch (const hw::BackendError& e) {
+      CHECK(std::string(e.what()).find("06040041") != std::string::npos);
+      CHECK(e.exit_code() == 8);
+    }
+    CHECK(b.state() == hw::BackendState::kUnconfigured);
+  }
+  SECTION("a drive that never boots") {
+    hw::CanBackend b(cfg, cfg.sim, can_cfg());
+    b.before_startup = [](cc::VirtualRig& rig) { rig.drive(1).faults().never_boot = true; };
+    try {
+      b.configure();
+      FAIL("start-up did not fail");
+    } catch (const hw::BackendError& e) {
+      CHECK(std::string(e.what()).find("boot") != std::string::npos);
+    }
+  }
+  SECTION("sim force sensor without the virtual bus") {
+    auto can = can_cfg();
+    can.backend.virtual_bus = false;
+    can.backend.force_sensor = "sim";
+    hw::CanBackend b(cfg, cfg.sim, can);
+    CHECK_THROWS_AS(b.configure(), manip::ConfigError);
+  }
+  SECTION("SocketCAN interface missing (or no AF_CAN): exit 8 with the bus named") {
+    auto can = can_cfg();
+    can.backend.virtual_bus = false;
+    can.buses[0].interface = "nosuchcan7";
+    hw::CanBackend b(cfg, cfg.sim, can);
+    try {
+      b.configure();
+      FAIL("started without the interface");
+    } catch (const hw::BackendError& e) {
+      CHECK(std::string(e.what()).find("CAN bus 'bus_x' (nosuchcan7)") != std::string::npos);
+      CHECK(e.exit_code() == 8);
+    }
+    CHECK(b.state() == hw::BackendState::kUnconfigured);
+  }
+}
+
+TEST_CASE("can backend: faults mid-session reach the safe state within one SYNC period with a latched reason", "[can_backend]") {
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  started(b);
+  Loop l{b};
+  for (int i = 0; i < 400; ++i) l.cycle(Vec2(5.0, 5.0));
+  REQUIRE(l.r.status == bs::kDrivesEnabled);
+  std::string reason_word;
+  std::uint32_t bit = 0;
+  int max_cycles = 8;
+  SECTION("drive enters Fault") {
+    b.sim_drive(0)->enter_fault(0x2310, 0);  // continuous over-current
+    bit = bs::kDriveFault;
+    reason_word = "node 1";
+  }
+  SECTION("faulting EMCY") {
+    b.sim_drive(1)->inject_emcy(0x3210, 0x05, false);  // DC link over-voltage: faults by the EMCY policy
+    bit = bs::kDriveFault;
+    reason_word = "EMCY";
+  }
+  SECTION("heartbeat loss") {
+    b.sim_drive(1)->faults().heartbeat_stopped = true;
+    bit = bs::kBackendError;
+    reason_word = "heartbeat";
+    max_cycles = 4 * 200;  // consumer time 150 ms
+  }
+  SECTION("TPDOs stop") {
+    b.sim_drive(0)->faults().drop_all_tpdos = true;
+    bit = bs::kBackendError;
+    reason_word = "TPDO";
+  }
+  const int n = l.until(bit, max_cycles);
+  INFO(b.fault_reason());
+  REQUIRE(n > 0);
+  CHECK(b.fault_reason().find(reason_word) != std::string::npos);
+  check_safe_next_cycle(l);
+  // latched: stays raised
+  l.cycle();
+  CHECK((l.r.status & bit) != 0);
+}
+
+TEST_CASE("can backend: a warning EMCY (temperature class) is logged by the master, no fault", "[can_backend]") {
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  started(b);
+  Loop l{b};
+  for (int i = 0; i < 40; ++i) l.cycle();
+  b.sim_drive(0)->inject_emcy(0x4310, 0x09, false);
+  CHECK(l.until(bs::kDriveFault | bs::kBackendError | bs::kHwEStopOpen, 400) == -1);
+  CHECK(b.fault_reason().empty());
+  bool logged = false;
+  auto& m = b.drives().master(0);
+  for (std::size_t i = 0; i < m.log_count(); ++i)
+    logged |= m.log_entry(i).code == cc::ErrorCode::EmcyWarning && m.log_entry(i).value == 0x4310;
+  CHECK(logged);
+}
+
+TEST_CASE("can backend: e-stop / STO reported by the drive is a latched hardware e-stop", "[can_backend]") {
+  const auto cfg = rt_cfg();
+  auto can = can_cfg();
+  can.backend.estop_statusword_bit = 14;  // the drive's manufacturer bit wired to the e-stop chain
+  hw::CanBackend b(cfg, cfg.sim, can);
+  started(b);
+  Loop l{b};
+  for (int i = 0; i < 40; ++i) l.cycle();
+  REQUIRE((l.r.status & bs::kHwEStopOpen) == 0);
+  b.sim_drive(1)->faults().statusword_extra = 1u << 14;
+  const int n = l.until(bs::kHwEStopOpen, 4);  // next TPDO: within 2 SYNC periods
+  REQUIRE(n > 0);
+  CHECK(b.fault_reason().find("e-stop") != std::string::npos);
+  CHECK(b.fault_reason().find("axis 1") != std::string::npos);
+}
+
+TEST_CASE("can backend: the real-time path does not allocate", "[can_backend][no_alloc]") {
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  started(b);
+  Loop l{b};
+  for (int i = 0; i < 100; ++i) l.cycle(Vec2(3.0, -3.0));
+  manip::test::AllocCounts got;
+  {
+    const manip::test::ThreadAllocScope s;
+    for (int i = 0; i < 4000; ++i) l.cycle(Vec2(3.0, -3.0));
+    b.sim_drive(0)->enter_fault(0x2310, 0);  // the fault path too
+    for (int i = 0; i < 20; ++i) l.cycle();
+    got = s.counts();
+  }
+  CHECK(got.news == 0);
+  CHECK((l.r.status & bs::kDriveFault) != 0);
+}
+
+namespace {
+int run_app(const std::string& args, std::string& output) {
+  const std::string out =
+      (std::filesystem::temp_directory_path() / ("manip_can_rt_" + std::to_string(::getpid()) + ".txt")).string();
+  const std::string cmd = "cd " + kSrc + " && " + std::string(MANIP_BINARY_DIR) + "/apps/manip_rt " + args + " >" + out + " 2>&1";
+  const int st = std::system(cmd.c_str());
+  std::ifstream in(out);
+  std::ostringstream os;
+  os << in.rdbuf();
+  output = os.str();
+  std::filesystem::remove(out);
+  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+}  // namespace
+
+TEST_CASE("manip_rt --backend can --can-virtual completes a protocol that estimates like --backend sim",
+          "[can_backend][session][full]") {
+  if (!std::filesystem::exists(std::string(MANIP_BINARY_DIR) + "/apps/manip_rt")) {
+    WARN("manip_rt not built: skipped (ninja manip_rt)");
+    return;
+  }
+  if (kSanitized) {
+    WARN("skipped under sanitizers (two 12-movement sessions + estimation)");
+    return;
+  }
+  const std::string dir = std::filesystem::temp_directory_path().string();
+  const std::string log_can = dir + "/manip_can_session_" + std::to_string(::getpid()) + ".lcm";
+  const std::string log_sim = dir + "/manip_sim_session_" + std::to_string(::getpid()) + ".lcm";
+  const std::string common = " --trials 12 --afap --lcm-url none --quiet --force --exit-on-fault";
+  std::string out;
+  const int rc_can = run_app("--backend can --can-virtual" + common + " --log " + log_can, out);
+  INFO(out);
+  REQUIRE(rc_can == 0);
+  const int rc_sim = run_app("--backend sim" + common + " --log " + log_sim, out);
+  REQUIRE(rc_sim == 0);
+  namespace est = manip::estimation;
+  est::EstimatorSettings es;
+  es.methods = {est::default_method()};
+  const auto rc = est::estimate_log(log_can, es);
+  const auto rs = est::estimate_log(log_sim, es);
+  std::filesystem::remove(log_can);
+  std::filesystem::remove(log_sim);
+  const est::Summary* sc = nullptr;
+  const est::Summary* ss = nullptr;
+  for (const auto& s : rc.summaries)
+    if (s.method == est::default_method() && s.group.is_session()) sc = &s;
+  for (const auto& s : rs.summaries)
+    if (s.method == est::default_method() && s.group.is_session()) ss = &s;
+  REQUIRE(sc);
+  REQUIRE(ss);
+  CHECK(rc.n_perturbed == rs.n_perturbed);
+  CHECK(rc.n_perturbed > 0);
+  const auto cfg = rt_cfg();
+  const manip::Mat2 k_true = cfg.sim.human.k_npm, d_true = cfg.sim.human.d_nspm;
+  std::ostringstream msg;
+  msg << "can  D " << sc->d_nspm << "\n K " << sc->k_npm << "\nsim  D " << ss->d_nspm << "\n K " << ss->k_npm
+      << "\n|dK| " << (sc->k_npm - ss->k_npm).norm() << " N/m, |dD| " << (sc->d_nspm - ss->d_nspm).norm() << " N s/m";
+  WARN(msg.str());
+  // The tolerance of the sim backend's rendering test (tests/integration/test_estimate_rt.cpp):
+  // 20 % of the truth's Frobenius norm, for K and for D.
+  CHECK((sc->k_npm - ss->k_npm).norm() < 0.20 * k_true.norm());
+  CHECK((sc->d_nspm - ss->d_nspm).norm() < 0.20 * d_true.norm());
+}
+
+// Through run_session (controller, supervisor, logger): a fault injected into
+// a simulated drive mid-session ends the session with the supervisor's
+// backend / hardware_estop fault, the drives safe, the reason latched.
+#include "offline_run.hpp"
+#include "manip/runtime/session.hpp"
+
+namespace {
+class Injecting final : public hw::Backend {
+ public:
+  Injecting(hw::CanBackend& in, std::int64_t at, std::function<void(hw::CanBackend&)> inject)
+      : in_(in), at_(at), inject_(std::move(inject)) {}
+  [[nodiscard]] std::string name() const override { return "can"; }
+  [[nodiscard]] bool supports_as_fast_as_possible() const override { return true; }
+  void read(manip::control::SensorReading& out) override {
+    if (++n_ == at_) inject_(in_);
+    in_.read(out);
+    if (out.status & (bs::kDriveFault | bs::kBackendError | bs::kHwEStopOpen) && first_fault_ < 0) first_fault_ = n_;
+  }
+  void write(const manip::control::ActuatorCommand& c) override { in_.write(c); }
+  void display(const manip::control::DisplayCue& c) override { in_.display(c); }
+  std::int64_t first_fault_{-1};
+
+ private:
+  void on_configure() override { in_.configure(); }
+  void on_enable() override { in_.enable(); }
+  void on_disable() noexcept override { in_.disable(); }
+  void on_shutdown() noexcept override { in_.shutdown(); }
+  hw::CanBackend& in_;
+  std::int64_t n_{0}, at_;
+  std::function<void(hw::CanBackend&)> inject_;
+};
+}  // namespace
+
+TEST_CASE("can backend in run_session: a drive fault mid-session ends it with the backend fault", "[can_backend][session]") {
+  const auto base = rt_cfg();
+  const auto cfg = manip::runtime::load_rt_config(kSrc + "/config/rt.yaml", manip::runtime::trials_overrides(base, 2));
+  auto can = can_cfg();
+  can.backend.estop_statusword_bit = 14;
+  std::uint32_t want = 0;
+  std::string word;
+  std::function<void(hw::CanBackend&)> inject;
+  SECTION("drive Fault") {
+    inject = [](hw::CanBackend& b) { b.sim_drive(1)->enter_fault(0x2310, 0); };
+    want = manip::control::fault::kBackend;
+    word = "Fault";
+  }
+  SECTION("heartbeat loss") {
+    inject = [](hw::CanBackend& b) { b.sim_drive(0)->faults().heartbeat_stopped = true; };
+    want = manip::control::fault::kBackend;
+    word = "heartbeat";
+  }
+  SECTION("e-stop chain") {
+    inject = [](hw::CanBackend& b) { b.sim_drive(0)->faults().statusword_extra = 1u << 14; };
+    want = manip::control::fault::kHardwareEStop;
+    word = "e-stop";
+  }
+  hw::CanBackend can_b(cfg, cfg.sim, can);
+  Injecting b(can_b, 8000, inject);  // 2 s into the session
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("manip_can_fault_" + std::to_string(::getpid()) + ".lcm")).string();
+  auto opt = offline_run_options(path);
+  opt.exit_on_fault = true;
+  std::ostringstream out;
+  const auto rep = manip::runtime::run_session(cfg, b, opt, out);
+  std::filesystem::remove(path);
+  INFO(out.str());
+  CHECK(rep.exit_code == 7);
+  CHECK((rep.fault_flags & want) != 0);
+  CHECK(can_b.fault_reason().find(word) != std::string::npos);
+  REQUIRE(b.first_fault_ > 0);
+  for (int a = 0; a < 2; ++a) CHECK(can_b.sim_drive(a)->applied_force_n() == 0.0);
+}
