@@ -6,7 +6,9 @@
 
 #include "manip/common/rng.hpp"
 #include "manip/control/trigger.hpp"
+#include "manip/model/arm.hpp"
 #include "manip/schema/codes.hpp"
+#include "manip/sim/truth.hpp"
 #include "manip/version.hpp"
 
 namespace manip::sim {
@@ -27,6 +29,9 @@ struct TrialRecord {
   std::vector<manip::state_t> states;
   std::int64_t onset_cycle{-1};
   std::vector<Vec2> x_true;  // shoulder frame, per cycle
+  // Exact velocity, acceleration (first substep, consistent with x, xd at the
+  // cycle's start) and perturbation force: the apparent truth's signals.
+  std::vector<Vec2> xd_true, xdd_true, u_pert;
 };
 
 class Quantizer {
@@ -101,6 +106,11 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
     TrialRecord rec;
     rec.states.reserve(static_cast<std::size_t>(n_cycles));
     rec.x_true.reserve(static_cast<std::size_t>(n_cycles));
+    if (trial >= 0) {
+      rec.xd_true.reserve(static_cast<std::size_t>(n_cycles));
+      rec.xdd_true.reserve(static_cast<std::size_t>(n_cycles));
+      rec.u_pert.reserve(static_cast<std::size_t>(n_cycles));
+    }
     human.begin_trial(reach, seed);
     if (perturb)
       trigger.arm(angle_rad, profile, (reach.goal_shoulder_m - reach.start_shoulder_m).y() >= 0 ? 1.0 : -1.0);
@@ -184,9 +194,37 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       s.fault_flags = 0;
       rec.states.push_back(s);
       rec.x_true.push_back(x_sh);
+      if (trial >= 0) {
+        rec.xd_true.push_back(xd_sh);
+        rec.xdd_true.push_back(xdd);
+        rec.u_pert.push_back(u_pert);
+      }
     }
     trigger.clear();
     return rec;
+  };
+
+  // Apparent truth (truth.hpp): exact Δ signals of each perturbed trial over
+  // [onset, onset + T_est], Δu_ext by eq. 21, M_BSP as the estimator takes it
+  // (eq. 16 at the onset position); fitted once over the session at the end.
+  const TwoLinkArm arm(d.session.anthropometrics);
+  std::vector<VariationalSamples> apparent_windows;
+  const auto add_apparent_window = [&](const TrialRecord& pert, const TrialRecord& tw, std::int64_t cycle0) {
+    if (pert.onset_cycle < cycle0) return;
+    const auto k0 = static_cast<std::size_t>(pert.onset_cycle - cycle0);
+    if (k0 >= pert.x_true.size() || tw.xd_true.size() != pert.xd_true.size()) return;
+    const auto m_bsp = arm.endpoint_inertia_at(pert.x_true[k0]);
+    if (!m_bsp) return;
+    VariationalSamples w;
+    w.m_bsp_kg = *m_bsp;
+    for (std::size_t k = k0; k < pert.x_true.size() && static_cast<double>(k - k0) * dt <= d.t_est_s; ++k) {
+      w.dx_m.push_back(pert.x_true[k] - tw.x_true[k]);
+      w.dxd_mps.push_back(pert.xd_true[k] - tw.xd_true[k]);
+      w.dxdd_mps2.push_back(pert.xdd_true[k] - tw.xdd_true[k]);
+      w.du_ext_n.push_back(
+          variational_external_force(plant, pert.u_pert[k] - tw.u_pert[k], w.dxd_mps.back(), w.dxdd_mps2.back()));
+    }
+    apparent_windows.push_back(std::move(w));
   };
 
   PortableRng design_rng(mix(d.seed, 0xDE51));
@@ -250,6 +288,7 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       }
       summary.max_dev_x1_m.push_back(m1);
       summary.max_dev_x2_m.push_back(m2);
+      if (d.write_apparent_truth) add_apparent_window(rec, twin, cycle);
       if (acc.n > 0) {
         manip::impedance_truth_t t{};
         t.trial = trial;
@@ -287,6 +326,24 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
     }
   }
   summary.cycles = cycle;
+  // One apparent truth for the session (trial -1: it belongs to no trial, so
+  // readers that attach a truth to a trial keep the intrinsic one).
+  if (d.write_apparent_truth) {
+    summary.apparent = fit_apparent_impedance(apparent_windows);
+    if (summary.apparent) {
+      manip::impedance_truth_t t{};
+      t.trial = -1;
+      t.t_est_s = d.t_est_s;
+      for (int i = 0; i < 2; ++i)
+        for (int j = 0; j < 2; ++j) {
+          t.m_kg[2 * i + j] = summary.apparent->m_bsp_kg(i, j);
+          t.d_nspm[2 * i + j] = summary.apparent->d_nspm(i, j);
+          t.k_npm[2 * i + j] = summary.apparent->k_npm(i, j);
+        }
+      t.model = kApparentTruthModel;
+      out.on_truth_impedance(t);
+    }
+  }
   return summary;
 }
 
