@@ -53,6 +53,7 @@ struct TruthAccumulator {
 void check_design(const SessionDesign& d) {
   if (auto why = d.session.invalid_reason()) throw std::invalid_argument("session design: " + *why);
   if (d.substeps < 1) throw std::invalid_argument("session design: substeps must be >= 1");
+  if (d.actuation_delay_cycles < 0) throw std::invalid_argument("session design: negative actuation delay");
   if (d.n_movements < 0) throw std::invalid_argument("session design: negative number of movements");
   const int n_pert = static_cast<int>(d.angles_deg.size()) * d.reps_per_angle;
   if (n_pert > d.n_movements)
@@ -173,9 +174,13 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       prev_meas_ws = meas_ws;
       copy2(s.x_ref_workspace_m, frame.point_to_workspace(x_sh));
       copy2(s.xd_ref_workspace_mps, frame.vector_to_workspace(xd_sh));
-      // Step the plant over the cycle with the held perturbation force.
+      // Step the plant over the cycle with the held perturbation force (the
+      // commanded one, or with a hidden actuation delay the one commanded
+      // actuation_delay_cycles earlier; the log keeps the commanded force).
+      const Vec2 u_applied =
+          d.actuation_delay_cycles > 0 ? trigger.force_shoulder_n(c - d.actuation_delay_cycles) : u_pert;
       for (int j = 0; j < d.substeps; ++j) {
-        const auto ps = step_ideal_admittance(human, plant, u_pert, h, d.midpoint_plant);
+        const auto ps = step_ideal_admittance(human, plant, u_applied, h, d.midpoint_plant);
         if (j == 0) {
           xdd = ps.xdd_mps2;
           f_sensor = ps.f_sensor_n;
@@ -197,7 +202,7 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       if (trial >= 0) {
         rec.xd_true.push_back(xd_sh);
         rec.xdd_true.push_back(xdd);
-        rec.u_pert.push_back(u_pert);
+        rec.u_pert.push_back(u_applied);  // the force the plant felt: the apparent truth is the person's
       }
     }
     trigger.clear();
