@@ -83,6 +83,12 @@ int main(int argc, char** argv) {
       const auto sum = run_session(hs.design, *hs.person, w);
       w.close();
       std::cerr << "make_hidden_session: " << sum.trials << " movements, " << sum.perturbed << " perturbed\n";
+      if (sum.apparent) {  // the truth an estimator should land on (sim/truth.hpp): the hidden person-side effects are in it
+        const auto& ap = *sum.apparent;
+        std::cerr << "make_hidden_session: apparent truth: D [" << ap.d_nspm(0, 0) << " " << ap.d_nspm(0, 1) << "; "
+                  << ap.d_nspm(1, 0) << " " << ap.d_nspm(1, 1) << "] N s/m, K [" << ap.k_npm(0, 0) << " "
+                  << ap.k_npm(0, 1) << "; " << ap.k_npm(1, 0) << " " << ap.k_npm(1, 1) << "] N/m\n";
+      }
     }
     // Move the finished log over the temporary AtomicOutput holds, then commit.
     std::error_code ec;
