@@ -55,19 +55,17 @@ HiddenEffect parse_hidden_effect(const std::string& text) {
 }
 
 HiddenEffectHuman::HiddenEffectHuman(const LinearHumanParams& person, std::vector<HiddenEffect> effects,
-                                     const HiddenDraw& draw, double plant_step_s, double workspace_to_shoulder_rad)
+                                     const HiddenDraw& draw, double plant_step_s)
     : inner_([&] {
         LinearHumanParams p = person;
         p.sample_rate_hz = 1.0 / plant_step_s;
         return p;
       }()) {
-  const double c = std::cos(workspace_to_shoulder_rad), s = std::sin(workspace_to_shoulder_rad);
-  ws_to_sh_ << c, -s, s, c;
   for (const auto& e : effects) {
     switch (e.mechanism) {
-      case HiddenMechanism::handle_mass: extra_mass_kg_ += e.magnitude * Mat2::Identity(); break;
+      case HiddenMechanism::handle_mass: break;  // in the plant (SessionDesign::hidden_handle_extra_kg)
       case HiddenMechanism::curl: curl_npm_ += (Mat2() << 0.0, e.magnitude, -e.magnitude, 0.0).finished(); break;
-      case HiddenMechanism::stage_friction: friction_n_ += e.magnitude; break;
+      case HiddenMechanism::stage_friction: break;  // in the plant (SessionDesign::hidden_stage_friction_n)
       case HiddenMechanism::reflex:
         reflex_k_npm_ += e.magnitude * person.k_npm;
         reflex_d_nspm_ += e.magnitude * person.d_nspm;
@@ -88,8 +86,7 @@ void HiddenEffectHuman::begin_trial(const ReachSpec& reach, std::uint64_t seed) 
 
 void HiddenEffectHuman::endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) {
   inner_.endpoint_dynamics(m_x_kg, h_n);
-  m_x_kg += extra_mass_kg_;
-  const Vec2 x = inner_.hand_position_m(), xd = inner_.hand_velocity_mps();
+  const Vec2 x = inner_.hand_position_m();
   if (!curl_npm_.isZero()) {
     const auto plan = min_jerk(reach_.start_shoulder_m, reach_.goal_shoulder_m, reach_.t_start_s, reach_.duration_s,
                                reach_.lateral_bow_m, inner_.time_s());
@@ -98,12 +95,6 @@ void HiddenEffectHuman::endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) {
   if (!reflex_k_npm_.isZero()) {
     const auto& old = delay_[head_];  // oldest entry: the error one reflex delay ago
     h_n += reflex_k_npm_ * Vec2(old[0], old[1]) + reflex_d_nspm_ * Vec2(old[2], old[3]);
-  }
-  if (friction_n_ > 0.0) {
-    constexpr double kSmoothingMps = 1e-3;
-    const Vec2 v_ws = ws_to_sh_.transpose() * xd;
-    const Vec2 f_ws(-friction_n_ * std::tanh(v_ws.x() / kSmoothingMps), -friction_n_ * std::tanh(v_ws.y() / kSmoothingMps));
-    h_n += ws_to_sh_ * f_ws;
   }
 }
 
@@ -130,14 +121,16 @@ HiddenSession make_hidden_session(const SessionDesign& base, const LinearHumanPa
   person.d_nspm *= hs.draw.impedance_scale;
   person.k_npm *= hs.draw.impedance_scale;
   const double fs = base.session.sample_rate_hz;
-  for (const auto& e : effects)
+  for (const auto& e : effects) {
     if (e.mechanism == HiddenMechanism::actuation_delay)
       hs.draw.actuation_delay_cycles += static_cast<int>(std::lround(e.magnitude * fs));
+    if (e.mechanism == HiddenMechanism::handle_mass) hs.design.hidden_handle_extra_kg += e.magnitude;
+    if (e.mechanism == HiddenMechanism::stage_friction) hs.design.hidden_stage_friction_n += e.magnitude;
+  }
   hs.design.seed = hs.draw.session_seed;
   hs.design.actuation_delay_cycles = hs.draw.actuation_delay_cycles;
   hs.design.session.session_id = "hidden-" + std::to_string(hidden_seed);
-  hs.person = std::make_unique<HiddenEffectHuman>(person, effects, hs.draw, 1.0 / (fs * base.substeps),
-                                                  base.session.frame.rot_rad);
+  hs.person = std::make_unique<HiddenEffectHuman>(person, effects, hs.draw, 1.0 / (fs * base.substeps));
   return hs;
 }
 

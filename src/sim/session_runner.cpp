@@ -54,6 +54,8 @@ void check_design(const SessionDesign& d) {
   if (auto why = d.session.invalid_reason()) throw std::invalid_argument("session design: " + *why);
   if (d.substeps < 1) throw std::invalid_argument("session design: substeps must be >= 1");
   if (d.actuation_delay_cycles < 0) throw std::invalid_argument("session design: negative actuation delay");
+  if (!(d.hidden_handle_extra_kg >= 0.0) || !(d.hidden_stage_friction_n >= 0.0))
+    throw std::invalid_argument("session design: hidden handle mass and stage friction must be >= 0");
   if (d.n_movements < 0) throw std::invalid_argument("session design: negative number of movements");
   const int n_pert = static_cast<int>(d.angles_deg.size()) * d.reps_per_angle;
   if (n_pert > d.n_movements)
@@ -85,6 +87,17 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
   const double dt = 1.0 / fs;
   const double h = dt / d.substeps;
   const PlantParams plant = plant_params(d.session);
+  // The plant as built (hidden handle mass included): what the apparent truth
+  // must use so that it stays the person's (truth.hpp).
+  PlantParams plant_true = plant;
+  plant_true.m_handle_kg += d.hidden_handle_extra_kg * Mat2::Identity();
+  const auto stage_friction = [&](const Vec2& xd_shoulder) -> Vec2 {
+    if (d.hidden_stage_friction_n <= 0.0) return Vec2::Zero();
+    constexpr double kSmoothingMps = 1e-3;  // keeps the explicit step from chattering at rest
+    const Vec2 v = d.session.frame.vector_to_workspace(xd_shoulder);
+    return d.session.frame.vector_to_shoulder(Vec2(-d.hidden_stage_friction_n * std::tanh(v.x() / kSmoothingMps),
+                                                   -d.hidden_stage_friction_n * std::tanh(v.y() / kSmoothingMps)));
+  };
   const PerturbationProfile profile = d.perturbation();
   const auto& frame = d.session.frame;
   auto* truth_src = dynamic_cast<TruthSource*>(&human);
@@ -179,8 +192,11 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       // actuation_delay_cycles earlier; the log keeps the commanded force).
       const Vec2 u_applied =
           d.actuation_delay_cycles > 0 ? trigger.force_shoulder_n(c - d.actuation_delay_cycles) : u_pert;
+      Vec2 f_extra0 = u_applied;
       for (int j = 0; j < d.substeps; ++j) {
-        const auto ps = step_ideal_admittance(human, plant, u_applied, h, d.midpoint_plant);
+        const Vec2 f_fric = stage_friction(human.hand_velocity_mps());
+        if (j == 0) f_extra0 = u_applied + f_fric;
+        const auto ps = step_ideal_admittance(human, plant_true, u_applied + f_fric, h, d.midpoint_plant);
         if (j == 0) {
           xdd = ps.xdd_mps2;
           f_sensor = ps.f_sensor_n;
@@ -202,7 +218,7 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       if (trial >= 0) {
         rec.xd_true.push_back(xd_sh);
         rec.xdd_true.push_back(xdd);
-        rec.u_pert.push_back(u_applied);  // the force the plant felt: the apparent truth is the person's
+        rec.u_pert.push_back(f_extra0);  // all non-admittance force the plant felt: the apparent truth is the person's
       }
     }
     trigger.clear();
@@ -227,7 +243,7 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       w.dxd_mps.push_back(pert.xd_true[k] - tw.xd_true[k]);
       w.dxdd_mps2.push_back(pert.xdd_true[k] - tw.xdd_true[k]);
       w.du_ext_n.push_back(
-          variational_external_force(plant, pert.u_pert[k] - tw.u_pert[k], w.dxd_mps.back(), w.dxdd_mps2.back()));
+          variational_external_force(plant_true, pert.u_pert[k] - tw.u_pert[k], w.dxd_mps.back(), w.dxdd_mps2.back()));
     }
     apparent_windows.push_back(std::move(w));
   };

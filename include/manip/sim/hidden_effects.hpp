@@ -54,17 +54,16 @@ struct HiddenDraw {
   int actuation_delay_cycles{0};
 };
 
-// A person with the hidden person-side and plant-side effects (friction,
-// handle mass, reflex, curl) added to the force it produces: the plant solves
-// (M_x + ΔM + M_adm + M_handle) ẍ = h + f_hidden - D_adm ẋ + u_pert, which is
-// the same equation as a plant with the extra handle mass and friction.
-// Forwards the intrinsic truth of the person (without the hidden effects).
-// Never allocates after construction.
+// A person with the hidden person-side effects (reflex, curl) added to the
+// force it produces. The apparatus effects (delay, friction, handle mass) are
+// in the plant (SessionDesign hooks, set by make_hidden_session), so the
+// apparent truth (truth.hpp) stays the person's. Forwards the intrinsic truth
+// of the person (without the hidden effects). Never allocates after
+// construction.
 class HiddenEffectHuman final : public HumanModel, public TruthSource {
  public:
-  // workspace_to_shoulder_rad: the stage axes' rotation (session frame), for friction.
   HiddenEffectHuman(const LinearHumanParams& person, std::vector<HiddenEffect> effects, const HiddenDraw& draw,
-                    double plant_step_s, double workspace_to_shoulder_rad);
+                    double plant_step_s);
   void begin_trial(const ReachSpec& reach, std::uint64_t seed) override;
   void endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) override;
   void advance(double dt_s, const Vec2& xdd_hand_mps2) override;
@@ -77,11 +76,8 @@ class HiddenEffectHuman final : public HumanModel, public TruthSource {
  private:
   LinearImpedanceHuman inner_;
   ReachSpec reach_;
-  Mat2 extra_mass_kg_{Mat2::Zero()};
   Mat2 curl_npm_{Mat2::Zero()};
   Mat2 reflex_k_npm_{Mat2::Zero()}, reflex_d_nspm_{Mat2::Zero()};
-  double friction_n_{0.0};
-  Mat2 ws_to_sh_{Mat2::Identity()};
   std::vector<std::array<double, 4>> delay_;  // ring of (e, ed) for the reflex
   std::size_t head_{0};
 };

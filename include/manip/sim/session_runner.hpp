@@ -48,9 +48,11 @@ struct SessionDesign {
   std::vector<double> angles_deg{30, 60, 120, 150, 210, 240, 300, 330};  // paper §4.2
   int reps_per_angle{3};                  // 8 x 3 = 24 perturbed (paper §5.2)
   bool write_twins{true};                 // MANIP_TRUTH_STATE for perturbed trials
-  // Hidden mechanism hook (sim/hidden_effects.hpp): the perturbation force
-  // reaches the plant this many cycles after it is commanded and logged.
-  int actuation_delay_cycles{0};
+  // Hidden apparatus mechanisms (sim/hidden_effects.hpp). The session message
+  // (and the log) keep the configured apparatus; the plant has these.
+  int actuation_delay_cycles{0};          // u_pert reaches the plant this many cycles after it is logged
+  double hidden_handle_extra_kg{0.0};     // plant handle mass = configured + this, both axes
+  double hidden_stage_friction_n{0.0};    // Coulomb per workspace axis: -F tanh(v_axis / 1 mm/s)
   bool write_apparent_truth{true};        // session-level MANIP_TRUTH_IMPEDANCE, model "apparent", trial -1 (sim/truth.hpp)
   Vec2 start_shoulder_m{0.0, 0.30};
   Vec2 goal_shoulder_m{0.0, 0.55};
