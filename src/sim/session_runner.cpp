@@ -248,6 +248,9 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
     apparent_windows.push_back(std::move(w));
   };
 
+  int last_perturbed = -1;
+  for (int i = 0; i < d.n_movements; ++i)
+    if (sched[static_cast<std::size_t>(i)].perturbed) last_perturbed = i;
   PortableRng design_rng(mix(d.seed, 0xDE51));
   for (int trial = 0; trial < d.n_movements; ++trial) {
     const auto& spec = sched[static_cast<std::size_t>(trial)];
@@ -325,6 +328,25 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
         out.on_truth_impedance(t);
       }
     }
+    // One apparent truth for the session, once the last perturbed trial is
+    // in (before its END event, so a log still ends with a trial event):
+    // trial -1, so readers that attach a truth to a trial keep the intrinsic one.
+    if (d.write_apparent_truth && trial == last_perturbed) {
+      summary.apparent = fit_apparent_impedance(apparent_windows);
+      if (summary.apparent) {
+        manip::impedance_truth_t t{};
+        t.trial = -1;
+        t.t_est_s = d.t_est_s;
+        for (int i = 0; i < 2; ++i)
+          for (int j = 0; j < 2; ++j) {
+            t.m_kg[2 * i + j] = summary.apparent->m_bsp_kg(i, j);
+            t.d_nspm[2 * i + j] = summary.apparent->d_nspm(i, j);
+            t.k_npm[2 * i + j] = summary.apparent->k_npm(i, j);
+          }
+        t.model = kApparentTruthModel;
+        out.on_truth_impedance(t);
+      }
+    }
     cycle += n_cycles;
     ev.kind = manip::trial_event_t::END;
     ev.cycle = cycle - 1;
@@ -347,24 +369,6 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
     }
   }
   summary.cycles = cycle;
-  // One apparent truth for the session (trial -1: it belongs to no trial, so
-  // readers that attach a truth to a trial keep the intrinsic one).
-  if (d.write_apparent_truth) {
-    summary.apparent = fit_apparent_impedance(apparent_windows);
-    if (summary.apparent) {
-      manip::impedance_truth_t t{};
-      t.trial = -1;
-      t.t_est_s = d.t_est_s;
-      for (int i = 0; i < 2; ++i)
-        for (int j = 0; j < 2; ++j) {
-          t.m_kg[2 * i + j] = summary.apparent->m_bsp_kg(i, j);
-          t.d_nspm[2 * i + j] = summary.apparent->d_nspm(i, j);
-          t.k_npm[2 * i + j] = summary.apparent->k_npm(i, j);
-        }
-      t.model = kApparentTruthModel;
-      out.on_truth_impedance(t);
-    }
-  }
   return summary;
 }
 

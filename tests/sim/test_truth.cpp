@@ -106,7 +106,7 @@ TEST_CASE("truth: linear person without reflex, apparent truth equals the intrin
   REQUIRE(c.intrinsic.size() == 8);
   REQUIRE(c.apparent.size() == 1);
   REQUIRE(sum.apparent);
-  // After the last trial, trial -1; the trials keep the intrinsic truth.
+  // With the last perturbed trial, trial -1; the trials keep the intrinsic truth.
   CHECK(c.order.back() == "apparent");
   CHECK(c.apparent[0].trial == -1);
   for (const auto& t : c.trials)

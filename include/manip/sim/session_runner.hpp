@@ -4,7 +4,7 @@
 // unperturbed twin of every perturbed trial (MANIP_TRUTH_STATE, same cycle
 // numbers) and the ground-truth impedance (MANIP_TRUTH_IMPEDANCE): per perturbed
 // trial the intrinsic one (model = the human's TruthSource::truth_model()), and
-// after the last trial one apparent impedance for the session (model
+// with the last perturbed trial one apparent impedance for the session (model
 // "apparent", trial -1; sim/truth.hpp).
 // Each perturbed trial is simulated twice with the same seed: unperturbed
 // (the twin) and perturbed; Δ = perturbed - twin is the true variational
