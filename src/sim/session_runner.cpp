@@ -6,7 +6,9 @@
 
 #include "manip/common/rng.hpp"
 #include "manip/control/trigger.hpp"
+#include "manip/model/arm.hpp"
 #include "manip/schema/codes.hpp"
+#include "manip/sim/truth.hpp"
 #include "manip/version.hpp"
 
 namespace manip::sim {
@@ -27,6 +29,9 @@ struct TrialRecord {
   std::vector<manip::state_t> states;
   std::int64_t onset_cycle{-1};
   std::vector<Vec2> x_true;  // shoulder frame, per cycle
+  // Exact velocity, acceleration (first substep, consistent with x, xd at the
+  // cycle's start) and perturbation force: the apparent truth's signals.
+  std::vector<Vec2> xd_true, xdd_true, u_pert;
 };
 
 class Quantizer {
@@ -48,6 +53,9 @@ struct TruthAccumulator {
 void check_design(const SessionDesign& d) {
   if (auto why = d.session.invalid_reason()) throw std::invalid_argument("session design: " + *why);
   if (d.substeps < 1) throw std::invalid_argument("session design: substeps must be >= 1");
+  if (d.actuation_delay_cycles < 0) throw std::invalid_argument("session design: negative actuation delay");
+  if (!(d.hidden_handle_extra_kg >= 0.0) || !(d.hidden_stage_friction_n >= 0.0))
+    throw std::invalid_argument("session design: hidden handle mass and stage friction must be >= 0");
   if (d.n_movements < 0) throw std::invalid_argument("session design: negative number of movements");
   const int n_pert = static_cast<int>(d.angles_deg.size()) * d.reps_per_angle;
   if (n_pert > d.n_movements)
@@ -79,6 +87,17 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
   const double dt = 1.0 / fs;
   const double h = dt / d.substeps;
   const PlantParams plant = plant_params(d.session);
+  // The plant as built (hidden handle mass included): what the apparent truth
+  // must use so that it stays the person's (truth.hpp).
+  PlantParams plant_true = plant;
+  plant_true.m_handle_kg += d.hidden_handle_extra_kg * Mat2::Identity();
+  const auto stage_friction = [&](const Vec2& xd_shoulder) -> Vec2 {
+    if (d.hidden_stage_friction_n <= 0.0) return Vec2::Zero();
+    constexpr double kSmoothingMps = 1e-3;  // keeps the explicit step from chattering at rest
+    const Vec2 v = d.session.frame.vector_to_workspace(xd_shoulder);
+    return d.session.frame.vector_to_shoulder(Vec2(-d.hidden_stage_friction_n * std::tanh(v.x() / kSmoothingMps),
+                                                   -d.hidden_stage_friction_n * std::tanh(v.y() / kSmoothingMps)));
+  };
   const PerturbationProfile profile = d.perturbation();
   const auto& frame = d.session.frame;
   auto* truth_src = dynamic_cast<TruthSource*>(&human);
@@ -101,6 +120,11 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
     TrialRecord rec;
     rec.states.reserve(static_cast<std::size_t>(n_cycles));
     rec.x_true.reserve(static_cast<std::size_t>(n_cycles));
+    if (trial >= 0) {
+      rec.xd_true.reserve(static_cast<std::size_t>(n_cycles));
+      rec.xdd_true.reserve(static_cast<std::size_t>(n_cycles));
+      rec.u_pert.reserve(static_cast<std::size_t>(n_cycles));
+    }
     human.begin_trial(reach, seed);
     if (perturb)
       trigger.arm(angle_rad, profile, (reach.goal_shoulder_m - reach.start_shoulder_m).y() >= 0 ? 1.0 : -1.0);
@@ -163,9 +187,16 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       prev_meas_ws = meas_ws;
       copy2(s.x_ref_workspace_m, frame.point_to_workspace(x_sh));
       copy2(s.xd_ref_workspace_mps, frame.vector_to_workspace(xd_sh));
-      // Step the plant over the cycle with the held perturbation force.
+      // Step the plant over the cycle with the held perturbation force (the
+      // commanded one, or with a hidden actuation delay the one commanded
+      // actuation_delay_cycles earlier; the log keeps the commanded force).
+      const Vec2 u_applied =
+          d.actuation_delay_cycles > 0 ? trigger.force_shoulder_n(c - d.actuation_delay_cycles) : u_pert;
+      Vec2 f_extra0 = u_applied;
       for (int j = 0; j < d.substeps; ++j) {
-        const auto ps = step_ideal_admittance(human, plant, u_pert, h, d.midpoint_plant);
+        const Vec2 f_fric = stage_friction(human.hand_velocity_mps());
+        if (j == 0) f_extra0 = u_applied + f_fric;
+        const auto ps = step_ideal_admittance(human, plant_true, u_applied + f_fric, h, d.midpoint_plant);
         if (j == 0) {
           xdd = ps.xdd_mps2;
           f_sensor = ps.f_sensor_n;
@@ -184,11 +215,42 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       s.fault_flags = 0;
       rec.states.push_back(s);
       rec.x_true.push_back(x_sh);
+      if (trial >= 0) {
+        rec.xd_true.push_back(xd_sh);
+        rec.xdd_true.push_back(xdd);
+        rec.u_pert.push_back(f_extra0);  // all non-admittance force the plant felt: the apparent truth is the person's
+      }
     }
     trigger.clear();
     return rec;
   };
 
+  // Apparent truth (truth.hpp): exact Δ signals of each perturbed trial over
+  // [onset, onset + T_est], Δu_ext by eq. 21, M_BSP as the estimator takes it
+  // (eq. 16 at the onset position); fitted once over the session at the end.
+  const TwoLinkArm arm(d.session.anthropometrics);
+  std::vector<VariationalSamples> apparent_windows;
+  const auto add_apparent_window = [&](const TrialRecord& pert, const TrialRecord& tw, std::int64_t cycle0) {
+    if (pert.onset_cycle < cycle0) return;
+    const auto k0 = static_cast<std::size_t>(pert.onset_cycle - cycle0);
+    if (k0 >= pert.x_true.size() || tw.xd_true.size() != pert.xd_true.size()) return;
+    const auto m_bsp = arm.endpoint_inertia_at(pert.x_true[k0]);
+    if (!m_bsp) return;
+    VariationalSamples w;
+    w.m_bsp_kg = *m_bsp;
+    for (std::size_t k = k0; k < pert.x_true.size() && static_cast<double>(k - k0) * dt <= d.t_est_s; ++k) {
+      w.dx_m.push_back(pert.x_true[k] - tw.x_true[k]);
+      w.dxd_mps.push_back(pert.xd_true[k] - tw.xd_true[k]);
+      w.dxdd_mps2.push_back(pert.xdd_true[k] - tw.xdd_true[k]);
+      w.du_ext_n.push_back(
+          variational_external_force(plant_true, pert.u_pert[k] - tw.u_pert[k], w.dxd_mps.back(), w.dxdd_mps2.back()));
+    }
+    apparent_windows.push_back(std::move(w));
+  };
+
+  int last_perturbed = -1;
+  for (int i = 0; i < d.n_movements; ++i)
+    if (sched[static_cast<std::size_t>(i)].perturbed) last_perturbed = i;
   PortableRng design_rng(mix(d.seed, 0xDE51));
   for (int trial = 0; trial < d.n_movements; ++trial) {
     const auto& spec = sched[static_cast<std::size_t>(trial)];
@@ -250,6 +312,7 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       }
       summary.max_dev_x1_m.push_back(m1);
       summary.max_dev_x2_m.push_back(m2);
+      if (d.write_apparent_truth) add_apparent_window(rec, twin, cycle);
       if (acc.n > 0) {
         manip::impedance_truth_t t{};
         t.trial = trial;
@@ -262,6 +325,25 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
             t.k_npm[2 * i + j] = kk(i, j);
           }
         t.model = truth_src ? truth_src->truth_model() : "unknown";
+        out.on_truth_impedance(t);
+      }
+    }
+    // One apparent truth for the session, once the last perturbed trial is
+    // in (before its END event, so a log still ends with a trial event):
+    // trial -1, so readers that attach a truth to a trial keep the intrinsic one.
+    if (d.write_apparent_truth && trial == last_perturbed) {
+      summary.apparent = fit_apparent_impedance(apparent_windows);
+      if (summary.apparent) {
+        manip::impedance_truth_t t{};
+        t.trial = -1;
+        t.t_est_s = d.t_est_s;
+        for (int i = 0; i < 2; ++i)
+          for (int j = 0; j < 2; ++j) {
+            t.m_kg[2 * i + j] = summary.apparent->m_bsp_kg(i, j);
+            t.d_nspm[2 * i + j] = summary.apparent->d_nspm(i, j);
+            t.k_npm[2 * i + j] = summary.apparent->k_npm(i, j);
+          }
+        t.model = kApparentTruthModel;
         out.on_truth_impedance(t);
       }
     }

@@ -2,7 +2,10 @@
 // Simulated lab sessions on the ideal admittance, written as the same message
 // stream a lab log holds (session message, 4 kHz state, trial events), plus the
 // unperturbed twin of every perturbed trial (MANIP_TRUTH_STATE, same cycle
-// numbers) and the ground-truth impedance (MANIP_TRUTH_IMPEDANCE).
+// numbers) and the ground-truth impedance (MANIP_TRUTH_IMPEDANCE): per perturbed
+// trial the intrinsic one (model = the human's TruthSource::truth_model()), and
+// with the last perturbed trial one apparent impedance for the session (model
+// "apparent", trial -1; sim/truth.hpp).
 // Each perturbed trial is simulated twice with the same seed: unperturbed
 // (the twin) and perturbed; Δ = perturbed - twin is the true variational
 // dynamics.
@@ -15,6 +18,7 @@
 // and the portable RNG (common/rng.hpp), so a seed reproduces the log with any
 // standard library.
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -24,6 +28,7 @@
 #include "manip/schema/session_description.hpp"
 #include "manip/sim/human.hpp"
 #include "manip/sim/ideal_admittance.hpp"
+#include "manip/sim/truth.hpp"
 
 namespace manip::sim {
 
@@ -43,6 +48,12 @@ struct SessionDesign {
   std::vector<double> angles_deg{30, 60, 120, 150, 210, 240, 300, 330};  // paper §4.2
   int reps_per_angle{3};                  // 8 x 3 = 24 perturbed (paper §5.2)
   bool write_twins{true};                 // MANIP_TRUTH_STATE for perturbed trials
+  // Hidden apparatus mechanisms (sim/hidden_effects.hpp). The session message
+  // (and the log) keep the configured apparatus; the plant has these.
+  int actuation_delay_cycles{0};          // u_pert reaches the plant this many cycles after it is logged
+  double hidden_handle_extra_kg{0.0};     // plant handle mass = configured + this, both axes
+  double hidden_stage_friction_n{0.0};    // Coulomb per workspace axis: -F tanh(v_axis / 1 mm/s)
+  bool write_apparent_truth{true};        // session-level MANIP_TRUTH_IMPEDANCE, model "apparent", trial -1 (sim/truth.hpp)
   Vec2 start_shoulder_m{0.0, 0.30};
   Vec2 goal_shoulder_m{0.0, 0.55};
   double reach_duration_s{3.0};
@@ -72,6 +83,7 @@ struct SessionRunSummary {
   int onsets{0};
   std::int64_t cycles{0};
   std::vector<double> max_dev_x1_m, max_dev_x2_m;  // per perturbed trial, |Δx| max within [0, T_est]
+  std::optional<ApparentImpedance> apparent;        // the session's apparent truth (sim/truth.hpp), if determined
 };
 
 // Runs the whole session into `out`. The human is reset per trial via begin_trial.

@@ -8,7 +8,7 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../../.." && pwd)"
 cd "$root"
 out="$(mktemp -d)"
-srcs=(src/sim/session_runner.cpp src/sim/linear_human.cpp src/sim/min_jerk.cpp src/sim/presets.cpp
+srcs=(src/sim/session_runner.cpp src/sim/truth.cpp src/sim/linear_human.cpp src/sim/min_jerk.cpp src/sim/presets.cpp
       src/control/trigger.cpp src/control/protocol.cpp src/schema/session_description.cpp src/schema/codes.cpp
       src/model/arm.cpp src/common/perturbation.cpp)
 inc=(-Iinclude -Ibuild/version -isystem /usr/include/eigen3 -isystem build/generated)

@@ -1,0 +1,111 @@
+// make_hidden_session: a "measured" manipulandum session with hidden
+// mechanisms (issue 11; include/manip/sim/hidden_effects.hpp), written as an
+// ordinary manip LCM log. The log's session message describes the apparatus as
+// configured; what was hidden is printed on stderr only (and, with
+// --key FILE, written to a separate file), never into the log.
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "manip/common/errors.hpp"
+#include "manip/common/exit_codes.hpp"
+#include "manip/common/output_file.hpp"
+#include "manip/logging/session_stream.hpp"
+#include "manip/sim/hidden_effects.hpp"
+#include "manip/sim/presets.hpp"
+#include "manip/version.hpp"
+
+int main(int argc, char** argv) {
+  using namespace manip::sim;
+  namespace exit_code = manip::exit_code;
+  CLI::App app{"make_hidden_session " + std::string(manip::kVersion) +
+               ": a simulated session (linear Table-1 person, ideal admittance) with hidden mechanisms, as an ordinary "
+               "log.\nExit codes: 0 ok, 2 bad command line, 6 output exists (no --force) or cannot be written, "
+               "70 internal error (docs/exit-codes.md)."};
+  std::string out = "hidden.lcm", key, noise = "realistic";
+  std::vector<std::string> hidden;
+  std::uint64_t hidden_seed = 1;
+  int movements = 100, reps = 3;
+  bool force = false;
+  app.add_option("-o,--out", out, "output LCM log (default hidden.lcm)");
+  app.add_option("--hidden", hidden,
+                 "MECHANISM:MAGNITUDE, SI units, repeatable: delay:0.002 (s) | friction:1 (N) | handle:0.3 (kg) | "
+                 "reflex:0.5 (x intrinsic K, D; 25-35 ms) | curl:40 (N/m). None: a clean session");
+  app.add_option("--hidden-seed", hidden_seed, "draw of the session seed, impedance scale and reflex delay (default 1)");
+  app.add_option("--noise", noise, "none | quantisation | motor | variability | realistic (default)");
+  app.add_option("--movements", movements, "number of movements (default 100)")->check(CLI::Range(1, 100000));
+  app.add_option("--reps", reps, "perturbed repetitions per angle (default 3)")->check(CLI::Range(1, 1000));
+  app.add_option("--key", key, "also write what was hidden (text) to this file");
+  app.add_flag("--force", force, "replace existing output files");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? exit_code::kOk : exit_code::kUsage;
+  }
+  try {
+    std::vector<HiddenEffect> effects;
+    for (const auto& h : hidden) effects.push_back(parse_hidden_effect(h));
+    SessionDesign base;
+    base.n_movements = movements;
+    base.reps_per_angle = reps;
+    base.session.source = "manip_sim/linear";
+    auto person = table1_person();
+    try {
+      apply_noise(parse_noise_level(noise), base, person);
+    } catch (const std::invalid_argument& e) {
+      throw manip::UsageError(std::string("--noise: ") + e.what());
+    }
+    auto hs = make_hidden_session(base, person, effects, hidden_seed);
+    try {
+      (void)perturbation_schedule(hs.design);
+    } catch (const std::invalid_argument& e) {
+      throw manip::UsageError(std::string("--movements/--reps: ") + e.what());
+    }
+    std::ostringstream what;
+    what << "hidden:";
+    if (effects.empty()) what << " none";
+    for (const auto& e : effects) what << " " << to_string(e);
+    what << "; hidden seed " << hidden_seed << ": session seed " << hs.draw.session_seed << ", impedance scale "
+         << hs.draw.impedance_scale << ", reflex delay " << hs.draw.reflex_delay_s * 1000 << " ms, actuation delay "
+         << hs.draw.actuation_delay_cycles << " cycles\n";
+    // The log: written next to the target and renamed when complete, so an
+    // existing file is never truncated (without --force it is refused first).
+    manip::AtomicOutput target(out, force);
+    const std::string tmp = target.temp_path() + ".lcm";
+    {
+      manip::logging::LogWritingHandler w(tmp);
+      const auto sum = run_session(hs.design, *hs.person, w);
+      w.close();
+      std::cerr << "make_hidden_session: " << sum.trials << " movements, " << sum.perturbed << " perturbed\n";
+      if (sum.apparent) {  // the truth an estimator should land on (sim/truth.hpp): the hidden person-side effects are in it
+        const auto& ap = *sum.apparent;
+        std::cerr << "make_hidden_session: apparent truth: D [" << ap.d_nspm(0, 0) << " " << ap.d_nspm(0, 1) << "; "
+                  << ap.d_nspm(1, 0) << " " << ap.d_nspm(1, 1) << "] N s/m, K [" << ap.k_npm(0, 0) << " "
+                  << ap.k_npm(0, 1) << "; " << ap.k_npm(1, 0) << " " << ap.k_npm(1, 1) << "] N/m\n";
+      }
+    }
+    // Move the finished log over the temporary AtomicOutput holds, then commit.
+    std::error_code ec;
+    std::filesystem::rename(tmp, target.temp_path(), ec);
+    if (ec) {
+      std::filesystem::remove(tmp, ec);
+      throw manip::OutputError(out + ": cannot be written (" + ec.message() + ")");
+    }
+    target.commit();
+    if (!key.empty()) manip::write_file_atomically(key, what.str(), force);
+    std::cerr << "make_hidden_session: wrote " << out << "; " << what.str();
+  } catch (const manip::Error& e) {
+    std::cerr << "make_hidden_session: " << e.what() << "\n";
+    return e.exit_code();
+  } catch (const std::exception& e) {
+    std::cerr << "make_hidden_session: internal error: " << e.what() << "\n";
+    return exit_code::kInternal;
+  }
+  return exit_code::kOk;
+}
