@@ -192,9 +192,8 @@ int run(int argc, char** argv) {
   if (!report_path.empty()) check_new_file("--report", report_path, force);
   if (!plots_dir.empty()) check_dir("--plots", plots_dir, force);
   if (!signals_dir.empty()) check_dir("--export-signals", signals_dir, force);
-  if (!plots_dir.empty() || !report_path.empty())
-    if (const auto why = python_unavailable_reason(); !why.empty())
-      throw manip::OutputError(std::string(!plots_dir.empty() ? "--plots" : "--report") + ": " + why + "; nothing was read");
+  // Python/matplotlib are checked when drawing (render_plots): if missing, the
+  // estimates are still printed and written, the figures named as not drawn (exit 6).
 
   int rc = ec::kOk;
   int n_readable = 0;

@@ -72,6 +72,9 @@ nlohmann::json summary_json(const Summary& s) {
     j["D_dir_std"] = num(d.d_std);
     j["K_dir_std"] = num(d.k_std);
     j["dir_n_trials"] = d.n_trials;
+    // One trial gives no interval: say so rather than plot a bare point as a result.
+    j["dir_identifiable"] = d.n_trials >= 2;
+    j["dir_flag"] = d.n_trials >= 2 ? "" : "one trial at this angle: no interval";
     j["D_dir_trials_Nspm"] = d.d_trials;
     j["K_dir_trials_Npm"] = d.k_trials;
     if (std::isfinite(d.k_true)) {
