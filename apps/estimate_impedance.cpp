@@ -222,7 +222,9 @@ int run(int argc, char** argv) {
       std::cerr << "estimate_impedance: " << log << ": " << r.n_trials << " trials, " << r.n_perturbed << " perturbed, "
                 << r.n_used << " used\n";
     for (const auto& i : r.issues) std::cerr << "estimate_impedance: " << log << ": trial " << i.trial << ": " << i.reason << "\n";
-    for (const auto& w : r.warnings) std::cerr << "estimate_impedance: " << log << ": " << w << "\n";
+    // The reader's warnings already start with the file name (and byte offset).
+    for (const auto& w : r.warnings)
+      std::cerr << "estimate_impedance: " << (w.rfind(log + ": ", 0) == 0 ? w : log + ": " + w) << "\n";
     std::cout << format_text(r, log) << "\n";
     bool flagged = !r.issues.empty();
     bool estimated = false;
