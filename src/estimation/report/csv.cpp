@@ -54,10 +54,11 @@ std::string csv_text(const std::vector<std::pair<std::string, Report>>& reports)
       const std::string sk = s.pooled ? "se" : "std over trials";
       if (s.directional) {
         const auto& d = *s.directional;
-        row(s.method, level, "", ang, "D_dir", d.d_nspm, d.d_lo, d.d_hi, d.d_std, "std over trials", d.n_trials, true,
-            "");
-        row(s.method, level, "", ang, "K_dir", d.k_npm, d.k_lo, d.k_hi, d.k_std, "std over trials", d.n_trials, true,
-            "");
+        // One trial gives no interval: flagged like the JSON's dir_identifiable.
+        const bool ok = d.n_trials >= 2;
+        const std::string why = ok ? "" : "one trial at this angle: no interval";
+        row(s.method, level, "", ang, "D_dir", d.d_nspm, d.d_lo, d.d_hi, d.d_std, "std over trials", d.n_trials, ok, why);
+        row(s.method, level, "", ang, "K_dir", d.k_npm, d.k_lo, d.k_hi, d.k_std, "std over trials", d.n_trials, ok, why);
       }
       for (int i = 0; i < 4; ++i)
         row(s.method, level, "", ang, element("D", i), s.d_nspm(i / 2, i % 2), s.d_lo(i / 2, i % 2), s.d_hi(i / 2, i % 2),
