@@ -255,12 +255,15 @@ TEST_CASE("estimate_impedance bad-input matrix", "[cli][bad_input]") {
   SECTION("a short log (session message, a few states, no trial): printed plainly, exit 5") {
     const std::string s = dir + "/short.lcm";
     auto r0 = rec;
+    r0.session.session_id = "";
+    r0.session.participant_id = "";
     r0.items.resize(20);
     for (auto& it : r0.items) it.kind = 0;
     write_raw(r0, s);
     const auto r = run(s + opts);
     CHECK(r.code == ec::kNothing);
     CHECK(has(r.out, "trials 0, perturbed 0, used 0"));
+    CHECK(has(r.out, "session (not given), participant (not given)"));
     CHECK_FALSE(has(r.out, "nan"));
     CHECK(has(r.err, s + ": no usable perturbed trial"));
   }

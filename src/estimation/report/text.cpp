@@ -25,10 +25,12 @@ std::string method_label(const std::string& m) {
 std::string format_text(const Report& r, const std::string& log_name) {
   std::ostringstream o;
   o << "manip estimate_impedance: " << log_name << "\n";
-  o << "  session " << r.info.session_id << ", participant " << r.info.participant_id << ", source " << r.info.source
-    << ", " << r.info.sample_rate_hz << " Hz\n";
+  // A short or foreign log may leave ids empty: say so instead of printing ", ,".
+  auto named = [](const std::string& v) { return v.empty() ? std::string("(not given)") : v; };
+  o << "  session " << named(r.info.session_id) << ", participant " << named(r.info.participant_id) << ", source "
+    << named(r.info.source) << ", " << num(r.info.sample_rate_hz) << " Hz\n";
   o << "  trials " << r.n_trials << ", perturbed " << r.n_perturbed << ", used " << r.n_used << "; SG window "
-    << r.sg_window << ", high-pass " << fmt(r.cutoff_used_hz, 3) << " Hz"
+    << (r.sg_window > 0 ? std::to_string(r.sg_window) : std::string("n/a")) << ", high-pass " << fmt(r.cutoff_used_hz, 3) << " Hz"
     << (r.settings.cutoff_auto ? " (auto)" : "") << ", T_est " << r.settings.pipeline.t_est_s << " s\n";
   if (r.psd.n_unperturbed > 0)
     o << "  PSD: unperturbed peak " << fmt(r.psd.peak_unperturbed_hz, 3) << " Hz; auto cut-off "
