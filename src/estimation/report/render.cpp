@@ -232,7 +232,7 @@ RenderResult render_report(const std::vector<std::string>& results_json, const R
 
 namespace manip::estimation {
 
-RenderResult write_plots(const Report& r, const std::string& log, const std::string& dir) {
+RenderResult write_plots(const Report& r, const std::string& log, const std::string& dir, bool force) {
   std::error_code ec;
   std::mt19937_64 rng(std::random_device{}());
   const fs::path tmp = fs::temp_directory_path(ec) / ("manip_plots_" + std::to_string(rng() % 1000000000));
@@ -257,9 +257,11 @@ RenderResult write_plots(const Report& r, const std::string& log, const std::str
     in.signals_dir = (tmp / "signals").string();
   }
   if (fs::exists(fs::path(dir) / "validation.json", ec)) in.validation_json = (fs::path(dir) / "validation.json").string();
-  return render_plots(in, dir, false);
+  return render_plots(in, dir, force);
 }
 
-void write_plots(const Report& r, const std::string& dir) { write_plots(r, "", dir); }
+// As the SVG writer did: manip_sim owns its --validate directory and decides
+// there what may be replaced, so the figures in it are redrawn.
+void write_plots(const Report& r, const std::string& dir) { write_plots(r, "", dir, true); }
 
 }  // namespace manip::estimation

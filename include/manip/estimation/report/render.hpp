@@ -53,10 +53,11 @@ std::string python_interpreter();
 // For a caller holding only a Report (manip_sim --validate today): writes
 // its JSON and signals into a temporary directory (removed afterwards) and
 // calls render_plots into dir, with dir/validation.json if present (Fig. 4).
-// Never overwrites an existing file in dir. Throws manip::OutputError.
-RenderResult write_plots(const Report& r, const std::string& log, const std::string& dir);
-// Former name, kept so manip_sim builds until it calls render_plots: the log
-// is taken from nowhere (Fig. 3 from the PSD arrays of the JSON instead).
+// An existing file in dir is refused unless force. Throws manip::OutputError.
+RenderResult write_plots(const Report& r, const std::string& log, const std::string& dir, bool force);
+// Former entry, kept so manip_sim builds until it calls render_plots: no
+// log (Fig. 3 from the JSON's PSD arrays), and its figures in dir are
+// redrawn (force), as the SVG writer did.
 void write_plots(const Report& r, const std::string& dir);
 
 }  // namespace manip::estimation
