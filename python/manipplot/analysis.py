@@ -245,7 +245,13 @@ def directional(s: Summary, which: str, trials: Optional[List[dict]] = None) -> 
     for key in ("%s_dir_%s" % (which, unit_key), "%s_dir" % which):
         if isinstance(r.get(key), (int, float)):
             lo, hi = r.get("%s_dir_ci95_lo" % which), r.get("%s_dir_ci95_hi" % which)
-            return Directional(value=float(r[key]), lo=lo, hi=hi, interval="estimator (95 %)", **base)
+            # The estimator's 1-D fit along the push is what one direction
+            # determines: its own flag, not the (unidentifiable) 2x2's.
+            if "dir_identifiable" in r:
+                base.update(identifiable=bool(r["dir_identifiable"]), flag=str(r.get("dir_flag") or ""),
+                            n_trials=r.get("dir_n_trials", s.n_trials))
+            label = "t over %d trials (95 %%)" % r["dir_n_trials"] if r.get("dir_n_trials") else "estimator (95 %)"
+            return Directional(value=float(r[key]), lo=lo, hi=hi, interval=label, **base)
     g = quad_gradient(phi)
     value = float(quad(M, phi))
     if trials:

@@ -393,7 +393,8 @@ def load_results(path: str) -> Results:
 SIGNAL_PAIRS = {  # signal -> (column stem, unit suffix)
     "dx": ("dx", "m"), "dxd": ("dxd", "mps"), "dxdd": ("dxdd", "mps2"),
     "du_ext": ("du_ext_adm", "n"), "du_ext_force": ("du_ext_force", "n"), "u_pert": ("u_pert", "n"),
-    "dx_true": ("dx_true", "m"),
+    "dx_true": ("dx_true", "m"), "dxd_true": ("dxd_true", "mps"), "dxdd_true": ("dxdd_true", "mps2"),
+    "du_ext_true": ("du_ext_true", "n"),
 }
 
 

@@ -52,7 +52,7 @@ def main(out):
     s_cmds = [[SIM, "--force", "--out", os.path.join(sdir, "s.lcm"), "--movements", "40", "--seed", "3",
                "--validate", os.path.join(sdir, "val")],
               [EST, os.path.join(sdir, "s.lcm"), "--method", "all", "--json", os.path.join(sdir, "s.json"),
-               "--export-signals", os.path.join(sdir, "sig"), "-q"]]
+               "--export-signals", os.path.join(sdir, "sig"), "-q", "--force"]]
 
     def make_session():
         run(s_cmds[0])
@@ -64,7 +64,7 @@ def main(out):
     for name, seed, person in GROUP:
         lcm = os.path.join(gdir, name + ".lcm")
         g_cmds.append([SIM, "--force", "--out", lcm, "--movements", "40", "--seed", str(seed), "--person", person])
-        g_cmds.append([EST, lcm, "--method", "all", "--json", os.path.join(gdir, name + ".json"), "-q"])
+        g_cmds.append([EST, lcm, "--method", "all", "--json", os.path.join(gdir, name + ".json"), "-q", "--force"])
 
     def make_group():
         for i, c in enumerate(g_cmds):

@@ -109,6 +109,8 @@ def main():
     gexp = []
     for p in FX.GROUP_JSON:
         gs = load_results(p).sessions[0]
+        if gs.psd.get("f_hz"):  # estimate_impedance's JSON carries the PSD arrays: Fig. 3 without the log
+            gexp.append("fig3_psd_jerk_x2")
         gexp += ["directional_%s" % m for m in gs.methods() if gs.per_angle(m)]
         gexp += ["table1_%s" % m for m in gs.methods() if gs.summary(m) is not None]
     gdom = render(exe, ghtml, os.path.join(out, "group.png"))

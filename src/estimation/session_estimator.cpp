@@ -9,10 +9,14 @@
 #include <numbers>
 #include <optional>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 #include <thread>
 
+#include "manip/common/channels.hpp"
 #include "manip/common/errors.hpp"
+#include "manip/logging/event_log.hpp"
+#include "manip/logging/session_stream.hpp"
 #include "manip/dsp/dsp.hpp"
 
 namespace manip::estimation {
@@ -258,6 +262,37 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
       }
     }
   }
+  // Per angle: the impedance along the push (the one honest per-angle
+  // result) and the 2x2 fits flagged; the session's pooled 2x2 is untouched.
+  // The 1-D fit does not depend on the method: computed once per angle.
+  std::map<double, DirectionalEstimate> dir;
+  for (double a : angles) {
+    std::vector<VariationalWindow> sub;
+    std::vector<Mat2> sub_m;
+    for (std::size_t i = 0; i < vw.size(); ++i)
+      if (to_deg(vw[i].angle_rad) == a) {
+        sub.push_back(vw[i]);
+        sub_m.push_back(mb[i]);
+      }
+    try {
+      DirectionalEstimate d = fit_directional(sub, sub_m, s_.ls.force, a);
+      if (truth.available) {
+        d.d_true = d.u.dot(truth.d_nspm * d.u);
+        d.k_true = d.u.dot(truth.k_npm * d.u);
+      }
+      dir.emplace(a, std::move(d));
+    } catch (const std::exception& e) {
+      rep.warnings.push_back("angle " + std::to_string(a) + ": directional fit failed: " + e.what());
+    }
+  }
+  static const std::string kNotIdentifiable =
+      "2x2 D, K not identifiable from one push direction; read D_dir/K_dir (impedance along the push)";
+  for (auto& sm : rep.summaries) {
+    if (!sm.group.is_angle()) continue;
+    if (auto it = dir.find(sm.group.angle_deg); it != dir.end()) sm.directional = it->second;
+    sm.identifiable = false;
+    sm.flag = sm.flag.empty() ? kNotIdentifiable : kNotIdentifiable + "; " + sm.flag;
+  }
   if (s_.keep_windows) rep.windows = std::move(vw);
   return rep;
 }
@@ -310,6 +345,35 @@ class TrialQueue {
 
 }  // namespace
 
+namespace {
+
+struct LiveRate {
+  std::uint64_t n{0};
+  double rate_hz{0};
+};
+
+// Count and mean rate of MANIP_STATE_LIVE events (by their LCM timestamps).
+LiveRate live_state_rate(const std::string& path) {
+  LiveRate r;
+  try {
+    logging::EventLogReader rd(path);
+    logging::RawEvent ev;
+    std::int64_t t0 = 0, t1 = 0;
+    while (rd.next(ev)) {
+      if (ev.channel != manip::channels::kStateLive) continue;
+      if (r.n == 0) t0 = ev.utime;
+      t1 = ev.utime;
+      ++r.n;
+    }
+    if (r.n > 1 && t1 > t0) r.rate_hz = static_cast<double>(r.n - 1) / (static_cast<double>(t1 - t0) * 1e-6);
+  } catch (const std::exception&) {
+    // Unreadable here means it was already reported by read_log's warnings.
+  }
+  return r;
+}
+
+}  // namespace
+
 Report estimate_log(const std::string& path, const EstimatorSettings& s) {
   SessionEstimator est(s);
   // A trial is ~0.5-2 MB; four in flight keep both threads busy.
@@ -350,6 +414,18 @@ Report estimate_log(const std::string& path, const EstimatorSettings& s) {
   queue.close();
   worker.join();
   if (worker_error) std::rethrow_exception(worker_error);
+  if (asmb.states_seen() == 0) {
+    // A recording of the live bus (lcm-logger) holds the decimated
+    // MANIP_STATE_LIVE only: say so instead of "no usable trial" (issue 13).
+    const auto live = live_state_rate(path);
+    if (live.n > 0) {
+      std::ostringstream m;
+      m << path << ": no " << manip::channels::kState << " (4 kHz) channel: this looks like a live-bus recording ("
+        << manip::channels::kStateLive << " at " << std::llround(live.rate_hz) << " Hz, " << live.n
+        << " messages); record with manip_rt --out";
+      throw manip::InputError(m.str());
+    }
+  }
   if (!asmb.has_session()) throw manip::InputError(path + ": no session message (MANIP_SESSION) in the log");
   return est.finish(asmb.issues(), asmb.warnings());
 }

@@ -23,9 +23,9 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
   if (y.has("sg_order")) s.pipeline.sg_order = static_cast<int>(y.integer("sg_order", 1, 10));
   if (y.has("sg_cutoff_hz")) s.pipeline.sg_cutoff_hz = y.number("sg_cutoff_hz", positive, "must be positive");
   if (y.has("sg_window")) {
-    s.pipeline.sg_window = static_cast<int>(y.integer("sg_window", 0, 1000001));
-    if (s.pipeline.sg_window != 0 && s.pipeline.sg_window % 2 == 0)
-      y.fail("sg_window", "must be odd (or 0 for automatic)");
+    s.pipeline.sg_window = static_cast<int>(y.integer("sg_window", 0, kMaxSgWindow));
+    if (s.pipeline.sg_window != 0 && (s.pipeline.sg_window % 2 == 0 || s.pipeline.sg_window < kMinSgWindow))
+      y.fail("sg_window", "must be odd and >= " + std::to_string(kMinSgWindow) + " (or 0 for automatic)");
   }
   if (y.has("hp_order")) s.pipeline.hp_order = static_cast<int>(y.integer("hp_order", 1, 10));
   if (y.has("hp_cutoff_hz")) {
@@ -34,7 +34,8 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
       s.cutoff_auto = true;
     } else {
       s.cutoff_auto = false;
-      s.pipeline.hp_cutoff_hz = y.number("hp_cutoff_hz", positive, "must be positive or 'auto'");
+      s.pipeline.hp_cutoff_hz = y.number("hp_cutoff_hz", [](double v) { return v > 0 && v <= kMaxCutoffHz; },
+                                         "must be in (0, 100] Hz (kMaxCutoffHz) or 'auto'");
     }
   }
   if (y.has("cutoff_auto_threshold_db")) s.cutoff_auto_threshold_db = y.any_number("cutoff_auto_threshold_db");

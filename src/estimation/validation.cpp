@@ -1,7 +1,5 @@
 #include "manip/estimation/validation.hpp"
 
-#include "manip/estimation/report/svg.hpp"
-
 #include <cmath>
 #include <iomanip>
 #include <sstream>
@@ -85,19 +83,9 @@ std::string format_text(const NrmseCurves& c) {
   return o.str();
 }
 
-void write_nrmse_plot(const NrmseCurves& c, const std::string& path) {
-  const char* colors[4] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728"};
-  std::vector<double> t_ms;
-  for (double dt : c.dt_s) t_ms.push_back(dt * 1000.0);
-  std::vector<Series> series;
-  for (std::size_t s = 0; s < 4; ++s)
-    for (int a = 0; a < 2; ++a) {
-      std::vector<double> y;
-      for (const auto& v : c.mean[s]) y.push_back(v(a) * 100.0);
-      series.push_back({std::string(NrmseCurves::kSignals[s]) + " x" + std::to_string(a + 1), t_ms, y, colors[s], a == 1});
-    }
-  svg_plot(path, "NRMSE of the estimated variational dynamics (Fig. 4), " + c.isolation + " isolation", "Δt [ms]",
-           "NRMSE [%]", series, {.y_from_zero = true});
+void write_nrmse_plot(const NrmseCurves& /*c*/, const std::string& /*svg_path*/) {
+  // Intentionally draws nothing: Fig. 4 is drawn by python/manipplot from
+  // validation.json (write_plots / render_plots, report/render.hpp).
 }
 
 }  // namespace manip::estimation

@@ -56,7 +56,7 @@ TEST_CASE("estimate_impedance: exit codes of the executable", "[cli]") {
   CHECK(run("--help", &out) == ec::kOk);
   CHECK(out.find("Exit codes") != std::string::npos);
   CHECK(out.find("  5  no usable perturbed trial") != std::string::npos);
-  CHECK(out.find("  pem: default") != std::string::npos);  // the method list comes from the registry
+  CHECK(out.find("[default, recommended]") != std::string::npos);  // the method list comes from the registry
 
   CHECK(run(good + " -q --method paper-pooled", &out) <= ec::kPartial);
   CHECK(run(good + " --no-such-option", &out) == ec::kUsage);
@@ -71,6 +71,6 @@ TEST_CASE("estimate_impedance: exit codes of the executable", "[cli]") {
   CHECK(out.find("bad_session.lcm: byte 0 (MANIP_SESSION): session message: sample_rate_hz") != std::string::npos);
   // One log unusable, the other still estimated and printed.
   CHECK(run(dir + "/bad_session.lcm " + good + " -q --method paper-pooled", &out) == ec::kInput);
-  CHECK(out.find("method paper-pooled: pooled fit") != std::string::npos);
+  CHECK(out.find("paper-pooled: pooled fit") != std::string::npos);
   CHECK(run(good + " -q --method paper-pooled --json " + dir + "/no/such/dir/out.json", &out) == ec::kOutput);
 }

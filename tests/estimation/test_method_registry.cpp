@@ -101,11 +101,11 @@ TEST_CASE("registry: a method registered from a test file runs through SessionEs
   const auto j = to_json(r, "mem");
   CHECK(j["session_summary"].contains("toy-every-other"));
   CHECK(j["settings"]["methods"][0] == "toy-every-other");
-  CHECK(format_text(r, "mem").find("method toy-every-other: pooled fit") != std::string::npos);
-  write_csv({{"mem", r}}, dir + "/out.csv");
+  CHECK(format_text(r, "mem").find("toy-every-other: pooled fit") != std::string::npos);
+  write_csv({{"mem", r}}, dir + "/out.csv", true);
   std::ifstream csv(dir + "/out.csv");
   const std::string text((std::istreambuf_iterator<char>(csv)), std::istreambuf_iterator<char>());
-  CHECK(text.find("mem,toy-every-other,session,") != std::string::npos);
+  CHECK(text.find(",toy-every-other,false,false,session,,,D11,damping,N s/m,") != std::string::npos);
 }
 
 TEST_CASE("summary groups are typed: the session, then each angle with its numeric angle in JSON and CSV") {

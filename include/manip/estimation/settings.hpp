@@ -14,6 +14,12 @@
 
 namespace manip::estimation {
 
+// Ranges shared by --config and the command line (an option outside them is
+// refused before any log is read).
+inline constexpr double kMaxCutoffHz = 100.0;  // high-pass of the jerk: the paper uses ~1 Hz; < any log's Nyquist
+inline constexpr int kMinSgWindow = 7;         // > sg_order (5) + 1: a window of 3 cannot fit an order-5 polynomial
+inline constexpr int kMaxSgWindow = 100001;
+
 struct EstimatorSettings {
   PipelineSettings pipeline{};
   bool cutoff_auto{false};

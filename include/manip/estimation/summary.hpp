@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "manip/estimation/directional.hpp"
 #include "manip/estimation/estimate.hpp"
 
 namespace manip::estimation {
@@ -52,6 +53,9 @@ struct Summary {
   std::string flag;
   int n_flagged_trials{0};
   std::optional<DisturbanceModel> disturbance;  // pem: the fitted model of the person's own motion
+  // Per-angle summaries: the impedance along the push (directional.hpp), the
+  // result to read for one angle; the 2x2 above is then flagged not identifiable.
+  std::optional<DirectionalEstimate> directional;
 };
 
 // Mean (std) over per-trial estimates, laid out like Table 1, with the 95%

@@ -25,6 +25,9 @@ NrmseCurves nrmse_curves(const std::vector<VariationalWindow>& windows, double t
                          const std::string& isolation = "paper");
 nlohmann::json to_json(const NrmseCurves& c);
 std::string format_text(const NrmseCurves& c);
+// Draws nothing (the hand-written SVG is gone): Fig. 4 is drawn by
+// python/manipplot from validation.json through render_plots (report/render.hpp).
+// Kept only so manip_sim builds until it calls render_plots.
 void write_nrmse_plot(const NrmseCurves& c, const std::string& svg_path);
 
 }  // namespace manip::estimation

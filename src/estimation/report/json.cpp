@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "manip/common/errors.hpp"
+#include "manip/estimation/methods/registry.hpp"
 #include "manip/estimation/report/format.hpp"
 
 namespace manip::estimation {
@@ -58,6 +59,30 @@ nlohmann::json summary_json(const Summary& s) {
           {"K_ci95_lo", mat(s.k_lo)}, {"K_ci95_hi", mat(s.k_hi)}, {"M_kg", mat(s.m_kg)},
           {"identifiable", s.identifiable}, {"flag", s.flag}, {"n_flagged_trials", s.n_flagged_trials}};
   if (s.disturbance) j["disturbance"] = disturbance_json(*s.disturbance);
+  if (s.directional) {
+    const auto& d = *s.directional;
+    auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    j["direction_u"] = {d.u.x(), d.u.y()};
+    j["D_dir_Nspm"] = num(d.d_nspm);
+    j["K_dir_Npm"] = num(d.k_npm);
+    j["D_dir_ci95_lo"] = num(d.d_lo);
+    j["D_dir_ci95_hi"] = num(d.d_hi);
+    j["K_dir_ci95_lo"] = num(d.k_lo);
+    j["K_dir_ci95_hi"] = num(d.k_hi);
+    j["D_dir_std"] = num(d.d_std);
+    j["K_dir_std"] = num(d.k_std);
+    j["dir_n_trials"] = d.n_trials;
+    // One trial gives no interval: say so rather than plot a bare point as a result.
+    j["dir_identifiable"] = d.n_trials >= 2;
+    j["dir_flag"] = d.n_trials >= 2 ? "" : "one trial at this angle: no interval";
+    j["D_dir_trials_Nspm"] = d.d_trials;
+    j["K_dir_trials_Npm"] = d.k_trials;
+    if (std::isfinite(d.k_true)) {
+      j["D_dir_true_Nspm"] = d.d_true;
+      j["K_dir_true_Npm"] = d.k_true;
+    }
+    j["dir_method"] = "1-D least squares along the push per trial, mean and Student-t 95 % interval over trials";
+  }
   return j;
 }
 
@@ -99,6 +124,20 @@ nlohmann::json to_json(const Report& r, const std::string& log_name) {
               {"ratio_at_1hz_db", std::isfinite(r.psd.ratio_at_1hz_db) ? nlohmann::json(r.psd.ratio_at_1hz_db) : nlohmann::json(nullptr)},
               {"n_unperturbed", r.psd.n_unperturbed},
               {"n_perturbed", r.psd.n_perturbed}};
+  // The averaged jerk PSDs up to 50 Hz (Fig. 3 without reading the log).
+  {
+    std::vector<double> f, pu, pp;
+    for (std::size_t i = 0; i < r.psd.f_hz.size() && r.psd.f_hz[i] <= 50.0; ++i) {
+      f.push_back(r.psd.f_hz[i]);
+      pu.push_back(i < r.psd.p_unperturbed.size() ? r.psd.p_unperturbed[i] : 0.0);
+      pp.push_back(i < r.psd.p_perturbed.size() ? r.psd.p_perturbed[i] : 0.0);
+    }
+    j["psd"]["f_hz"] = f;
+    j["psd"]["p_unperturbed"] = pu;
+    j["psd"]["p_perturbed"] = pp;
+    j["psd"]["unit"] = "(m/s^3)^2/Hz";
+  }
+  j["default_method"] = default_method();
   if (r.truth.available)
     j["truth"] = {{"model", r.truth.model}, {"n_trials", r.truth.n_trials}, {"D_Nspm", mat(r.truth.d_nspm)},
                   {"K_Npm", mat(r.truth.k_npm)}, {"M_kg", mat(r.truth.m_kg)}};

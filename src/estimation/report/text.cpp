@@ -1,87 +1,134 @@
 #include "manip/estimation/report/text.hpp"
 
 #include <cmath>
-#include <filesystem>
-#include <fstream>
-#include <iomanip>
-#include <set>
 #include <sstream>
 
-#include "manip/common/errors.hpp"
+#include "manip/estimation/methods/registry.hpp"
 #include "manip/estimation/report/format.hpp"
 
 namespace manip::estimation {
 
+using report_detail::element;
 using report_detail::fmt;
-using report_detail::mat;
-using report_detail::create_output_dir;
+using report_detail::num;
+using report_detail::TextTable;
+using report_detail::with_interval;
+
+namespace {
+
+std::string method_label(const std::string& m) {
+  return m == default_method() ? m + " (default, recommended)" : (method_bias_note(m).empty() ? m : m + " (BIASED)");
+}
+
+}  // namespace
 
 std::string format_text(const Report& r, const std::string& log_name) {
   std::ostringstream o;
   o << "manip estimate_impedance: " << log_name << "\n";
-  o << "  session " << r.info.session_id << ", participant " << r.info.participant_id << ", source " << r.info.source
-    << ", " << r.info.sample_rate_hz << " Hz\n";
+  // A short or foreign log may leave ids empty: say so instead of printing ", ,".
+  auto named = [](const std::string& v) { return v.empty() ? std::string("(not given)") : v; };
+  o << "  session " << named(r.info.session_id) << ", participant " << named(r.info.participant_id) << ", source "
+    << named(r.info.source) << ", " << num(r.info.sample_rate_hz) << " Hz\n";
   o << "  trials " << r.n_trials << ", perturbed " << r.n_perturbed << ", used " << r.n_used << "; SG window "
-    << r.sg_window << ", high-pass " << fmt(r.cutoff_used_hz, 3) << " Hz"
+    << (r.sg_window > 0 ? std::to_string(r.sg_window) : std::string("n/a")) << ", high-pass " << fmt(r.cutoff_used_hz, 3) << " Hz"
     << (r.settings.cutoff_auto ? " (auto)" : "") << ", T_est " << r.settings.pipeline.t_est_s << " s\n";
   if (r.psd.n_unperturbed > 0)
     o << "  PSD: unperturbed peak " << fmt(r.psd.peak_unperturbed_hz, 3) << " Hz; auto cut-off "
       << fmt(r.psd.cutoff_auto_hz, 3) << " Hz (ratio > " << r.settings.cutoff_auto_threshold_db
       << " dB); perturbed/unperturbed at 1 Hz " << fmt(r.psd.ratio_at_1hz_db, 1) << " dB\n";
-  for (const auto& s : r.summaries) {
-    if (!s.group.is_session()) continue;
-    o << "\n  method " << s.method << ": " << s.kind << ", " << s.n_trials << " trials"
-      << (s.identifiable ? "" : "  ** NOT IDENTIFIABLE: " + s.flag + " **") << "\n";
-    const bool pooled = s.pooled;
-    o << "    Damping D [Ns/m]" << std::string(22, ' ') << "Stiffness K [N/m]\n";
-    for (int i = 0; i < 2; ++i) {
-      std::ostringstream row;
-      for (int j = 0; j < 2; ++j)
-        row << std::setw(8) << fmt(s.d_nspm(i, j)) << " (" << std::setw(6) << fmt(s.d_spread(i, j)) << ") ";
-      row << "   ";
-      for (int j = 0; j < 2; ++j)
-        row << std::setw(8) << fmt(s.k_npm(i, j)) << " (" << std::setw(6) << fmt(s.k_spread(i, j)) << ") ";
-      o << "    " << row.str() << "\n";
-    }
-    o << "    (" << (pooled ? "estimate (SE)" : "mean (std)") << "; M_BSP at onset ~ [" << fmt(s.m_kg(0, 0)) << ", "
-      << fmt(s.m_kg(0, 1)) << "; " << fmt(s.m_kg(1, 0)) << ", " << fmt(s.m_kg(1, 1)) << "] kg)\n";
-    if (pooled)
-      o << "    95% CI: D11 [" << fmt(s.d_lo(0, 0)) << ", " << fmt(s.d_hi(0, 0)) << "], K11 [" << fmt(s.k_lo(0, 0))
-        << ", " << fmt(s.k_hi(0, 0)) << "], K22 [" << fmt(s.k_lo(1, 1)) << ", " << fmt(s.k_hi(1, 1)) << "]\n";
-    if (s.disturbance)
-      o << "    person's own motion (" << (s.disturbance->box_jenkins ? "box-jenkins" : "armax") << "): motor noise " << fmt(s.disturbance->motor_noise_n, 3)
-        << " N std, tau " << fmt(s.disturbance->motor_tau_s * 1000, 1) << " ms; position noise "
-        << fmt(s.disturbance->meas_std_m * 1e6, 2) << " um std\n";
-  }
-  if (r.truth.available) {
-    o << "\n  ground truth (" << r.truth.model << ", mean over " << r.truth.n_trials << " trials): D = ["
-      << fmt(r.truth.d_nspm(0, 0)) << ", " << fmt(r.truth.d_nspm(0, 1)) << "; " << fmt(r.truth.d_nspm(1, 0)) << ", "
-      << fmt(r.truth.d_nspm(1, 1)) << "], K = [" << fmt(r.truth.k_npm(0, 0)) << ", " << fmt(r.truth.k_npm(0, 1)) << "; "
-      << fmt(r.truth.k_npm(1, 0)) << ", " << fmt(r.truth.k_npm(1, 1)) << "]\n";
+
+  // Table 1: one row per method, every element labelled, "estimate [95 % interval]".
+  bool any_session = false;
+  for (int which = 0; which < 2; ++which) {
+    const char* m = which == 0 ? "D" : "K";
+    TextTable t({"method", std::string(m) + "11 [" + (which == 0 ? "N s/m" : "N/m") + "]",
+                 std::string(m) + "12", std::string(m) + "21", std::string(m) + "22", "n", "identifiable"});
     for (const auto& s : r.summaries) {
       if (!s.group.is_session()) continue;
-      o << "    " << std::left << std::setw(13) << s.method << std::right << " error vs truth: D";
-      for (int i = 0; i < 4; ++i) {
-        const double t = r.truth.d_nspm(i / 2, i % 2);
-        o << " " << fmt(100.0 * (s.d_nspm(i / 2, i % 2) - t) / std::abs(t), 1) << "%";
-      }
-      o << "  K";
-      for (int i : {0, 1, 3}) {
-        const double t = r.truth.k_npm(i / 2, i % 2);
-        o << " " << fmt(100.0 * (s.k_npm(i / 2, i % 2) - t) / std::abs(t), 1) << "%";
-      }
-      o << "\n";
+      any_session = true;
+      const Mat2& v = which == 0 ? s.d_nspm : s.k_npm;
+      const Mat2& lo = which == 0 ? s.d_lo : s.k_lo;
+      const Mat2& hi = which == 0 ? s.d_hi : s.k_hi;
+      std::vector<std::string> row{method_label(s.method)};
+      for (int i = 0; i < 4; ++i) row.push_back(with_interval(v(i / 2, i % 2), lo(i / 2, i % 2), hi(i / 2, i % 2)));
+      row.push_back(std::to_string(s.n_trials));
+      row.push_back(s.identifiable ? "yes" : "NO");
+      t.add(row);
     }
+    if (!any_session) break;
+    o << "\n  session " << (which == 0 ? "damping D [N s/m]" : "stiffness K [N/m]")
+      << ", estimate [95 % interval] (Table 1):\n"
+      << t.str();
   }
-  if (!r.trials.empty()) {
-    o << "\n  per trial:\n    method    trial angle    D11     D12     D21     D22     K11     K12     K22   VAF  flag\n";
-    for (const auto& t : r.trials) {
-      o << "    " << std::left << std::setw(9) << t.method << std::right << std::setw(6) << t.trial << std::setw(6)
-        << fmt(t.angle_deg, 0);
-      for (int i = 0; i < 4; ++i) o << std::setw(8) << fmt(t.est.d_nspm(i / 2, i % 2), 1);
-      o << std::setw(8) << fmt(t.est.k_npm(0, 0), 0) << std::setw(8) << fmt(t.est.k_npm(0, 1), 0) << std::setw(8)
-        << fmt(t.est.k_npm(1, 1), 0) << std::setw(6) << fmt(t.est.vaf, 2) << "  " << (t.est.identifiable ? "" : "not identifiable") << "\n";
+  for (const auto& s : r.summaries) {
+    if (!s.group.is_session()) continue;
+    o << "  " << s.method << ": " << s.kind << "; M_BSP at onset ~ [" << num(s.m_kg(0, 0)) << ", " << num(s.m_kg(0, 1))
+      << "; " << num(s.m_kg(1, 0)) << ", " << num(s.m_kg(1, 1)) << "] kg";
+    if (s.disturbance)
+      o << "; person's own motion (" << (s.disturbance->box_jenkins ? "box-jenkins" : "armax") << "): motor noise "
+        << num(s.disturbance->motor_noise_n) << " N std, tau " << num(s.disturbance->motor_tau_s * 1000) << " ms, position noise "
+        << num(s.disturbance->meas_std_m * 1e6) << " um std";
+    o << "\n";
+    if (!s.identifiable) o << "    ** " << s.method << " NOT IDENTIFIABLE: " << s.flag << " **\n";
+    if (const auto b = method_bias_note(s.method); !b.empty()) o << "    ** " << s.method << " " << b << " **\n";
+  }
+
+  if (r.truth.available) {
+    o << "\n  ground truth (" << r.truth.model << ", mean over " << r.truth.n_trials << " trials):\n";
+    TextTable t({"", "D11 [N s/m]", "D12", "D21", "D22", "K11 [N/m]", "K12", "K21", "K22"});
+    std::vector<std::string> row{"truth"};
+    for (int i = 0; i < 4; ++i) row.push_back(num(r.truth.d_nspm(i / 2, i % 2)));
+    for (int i = 0; i < 4; ++i) row.push_back(num(r.truth.k_npm(i / 2, i % 2)));
+    t.add(row);
+    o << t.str();
+    o << "  error vs truth [% of the true element]:\n";
+    TextTable e({"method", "D11", "D12", "D21", "D22", "K11", "K12", "K21", "K22"});
+    for (const auto& s : r.summaries) {
+      if (!s.group.is_session()) continue;
+      std::vector<std::string> er{method_label(s.method)};
+      for (int i = 0; i < 4; ++i) {
+        const double tv = r.truth.d_nspm(i / 2, i % 2);
+        er.push_back(fmt(100.0 * (s.d_nspm(i / 2, i % 2) - tv) / std::abs(tv), 1) + " %");
+      }
+      for (int i = 0; i < 4; ++i) {
+        const double tv = r.truth.k_npm(i / 2, i % 2);
+        er.push_back(fmt(100.0 * (s.k_npm(i / 2, i % 2) - tv) / std::abs(tv), 1) + " %");
+      }
+      e.add(er);
     }
+    o << e.str();
+  }
+
+  // Per angle: the impedance along the push (directional.hpp); the per-angle
+  // 2x2 fits are not identifiable and not printed (JSON/CSV keep them, flagged).
+  {
+    TextTable t({"angle [deg]", "n", "D_dir [N s/m]", "K_dir [N/m]", "D_dir true", "K_dir true"});
+    bool any = false;
+    for (const auto& s : r.summaries) {
+      if (!s.group.is_angle() || !s.directional || s.method != r.summaries.front().method) continue;
+      const auto& d = *s.directional;
+      t.add({num(d.angle_deg), std::to_string(d.n_trials), with_interval(d.d_nspm, d.d_lo, d.d_hi),
+             with_interval(d.k_npm, d.k_lo, d.k_hi), num(d.d_true), num(d.k_true)});
+      any = true;
+    }
+    if (any)
+      o << "\n  per angle: impedance along the push u (uᵀDu, uᵀKu), mean [95 % interval] over trials; "
+           "a single push direction cannot determine the 2x2 D and K:\n"
+        << t.str();
+  }
+
+  if (!r.trials.empty()) {
+    TextTable t({"method", "trial", "angle [deg]", "D11 [N s/m]", "D12", "D21", "D22", "K11 [N/m]", "K12", "K21", "K22",
+                 "VAF", "flag"});
+    for (const auto& tr : r.trials) {
+      std::vector<std::string> row{tr.method, std::to_string(tr.trial), num(tr.angle_deg)};
+      for (int i = 0; i < 4; ++i) row.push_back(num(tr.est.d_nspm(i / 2, i % 2)));
+      for (int i = 0; i < 4; ++i) row.push_back(num(tr.est.k_npm(i / 2, i % 2)));
+      row.push_back(fmt(tr.est.vaf, 2));
+      row.push_back(tr.est.identifiable ? "" : "not identifiable");
+      t.add(row);
+    }
+    o << "\n  per trial (one push direction each: 2x2 values not identifiable, shown for diagnosis):\n" << t.str();
   }
   for (const auto& i : r.issues) o << "  excluded: trial " << i.trial << ": " << i.reason << "\n";
   for (const auto& w : r.warnings) o << "  warning: " << w << "\n";

@@ -23,6 +23,8 @@ std::vector<std::string> all_methods();
 std::string method_list();
 // The method run when none is chosen.
 std::string default_method();
+// Non-empty for a method known to be biased (shown wherever its results are).
+std::string method_bias_note(std::string_view name);
 
 // Adds a method; throws std::invalid_argument if its name is taken or empty.
 // Not thread-safe: register at start-up (or from a static MethodRegistration).

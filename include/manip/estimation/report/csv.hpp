@@ -1,5 +1,7 @@
 #pragma once
-// Reports as CSV: one row per summary and per (method, trial).
+// Reports as CSV in tidy long form: one row per (log, method, level, trial or
+// angle, parameter), typed columns, SI values with the unit in its own
+// column (layout in docs/estimator.md, "CSV").
 #include <string>
 #include <utility>
 #include <vector>
@@ -8,7 +10,10 @@
 
 namespace manip::estimation {
 
-// Throws manip::OutputError naming the file.
-void write_csv(const std::vector<std::pair<std::string, Report>>& reports, const std::string& path);
+// The CSV text (header included).
+std::string csv_text(const std::vector<std::pair<std::string, Report>>& reports);
+// Through AtomicOutput: refuses an existing file unless force; throws
+// manip::OutputError naming the file; nothing left behind on failure.
+void write_csv(const std::vector<std::pair<std::string, Report>>& reports, const std::string& path, bool force);
 
 }  // namespace manip::estimation
