@@ -19,6 +19,8 @@ PKGS=(
   # install/CPack (.deb dependencies by dpkg-shlibdeps) and the Java/MATLAB jar (docs/matlab.md)
   dpkg-dev file default-jdk-headless liblcm-java
   qemu-system-x86 busybox-static cpio xz-utils
+  # libFuzzer harnesses (scripts/fuzz.sh) and the second standard library check
+  clang libfuzzer-14-dev libclang-rt-14-dev libc++-dev libc++abi-dev
 )
 
 SUDO=""

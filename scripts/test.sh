@@ -11,6 +11,12 @@ cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DMANIP_WERROR=ON >/dev/
 ninja -C build
 echo "== tests ==" >&2
 (cd build && ctest --output-on-failure -j "$jobs")
+# Fuzzing with libFuzzer (clang, ASan + UBSan): every harness of fuzz/ for a
+# bounded time; a crash, leak, timeout or out-of-memory fails the run.
+if [ "${MANIP_SKIP_FUZZ:-0}" != "1" ]; then
+  echo "== fuzzing (${MANIP_FUZZ_SECONDS:-15} s per harness) ==" >&2
+  scripts/fuzz.sh "${MANIP_FUZZ_SECONDS:-15}"
+fi
 if [ "${MANIP_SKIP_SANITIZERS:-0}" != "1" ]; then
   echo "== build (ASan + UBSan) ==" >&2
   cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMANIP_WERROR=ON -DMANIP_SANITIZE=ON \

@@ -3,6 +3,8 @@
 // shared strict reader can replace it later.
 #include "manip/canopen/config.hpp"
 
+#include "manip/common/yaml_reader.hpp"
+
 #include <yaml-cpp/yaml.h>
 
 #include <cerrno>
@@ -177,7 +179,7 @@ struct Reader {
 void read_master(Reader& r, const YAML::Node& n, MasterConfig& m) {
   if (!n.IsMap()) return r.fail(n, "master", "expected a mapping");
   for (const auto& kv : n) {
-    const std::string k = kv.first.as<std::string>();
+    const std::string k = manip::yaml::scalar_text(kv.first);
     const YAML::Node& v = kv.second;
     const std::string key = "master." + k;
     if (k == "node_id") r.integer(v, key, m.node_id, 1, 127);
@@ -196,7 +198,7 @@ void read_master(Reader& r, const YAML::Node& n, MasterConfig& m) {
 void read_drive(Reader& r, const YAML::Node& n, const std::string& prefix, DriveConfig& d, bool defaults) {
   if (!n.IsMap()) return r.fail(n, prefix, "expected a mapping");
   for (const auto& kv : n) {
-    const std::string k = kv.first.as<std::string>();
+    const std::string k = manip::yaml::scalar_text(kv.first);
     const YAML::Node& v = kv.second;
     const std::string key = prefix + "." + k;
     if (k == "bus") r.text(v, key, d.bus);
@@ -233,7 +235,7 @@ void read_drive(Reader& r, const YAML::Node& n, const std::string& prefix, Drive
 void read_backend(Reader& r, const YAML::Node& n, BackendOptions& b) {
   if (!n.IsMap()) return r.fail(n, "backend", "expected a mapping");
   for (const auto& kv : n) {
-    const std::string k = kv.first.as<std::string>();
+    const std::string k = manip::yaml::scalar_text(kv.first);
     const YAML::Node& v = kv.second;
     const std::string key = "backend." + k;
     if (k == "virtual") r.boolean(v, key, b.virtual_bus);
@@ -264,15 +266,18 @@ void read_backend(Reader& r, const YAML::Node& n, BackendOptions& b) {
 
 }  // namespace
 
-bool parse_config(const std::string& text, const std::string& source, CanConfig& out,
-                  std::vector<std::string>& errors) {
+namespace {
+bool parse_config_checked(const std::string& text, const std::string& source, CanConfig& out,
+                          std::vector<std::string>& errors) {
   const std::size_t errors_before = errors.size();
   Reader r{source, errors};
   YAML::Node root;
   try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    errors.push_back(source + ":" + std::to_string(e.mark.line + 1) + ": <yaml>: " + e.msg);
+    // The one strict YAML parse of manip: syntax errors and duplicate keys
+    // (yaml-cpp would silently keep the first of two) name the file and line.
+    root = manip::yaml::parse(text, source);
+  } catch (const manip::ConfigError& e) {
+    errors.push_back(e.what());
     return false;
   }
   if (!root.IsMap()) {
@@ -288,7 +293,7 @@ bool parse_config(const std::string& text, const std::string& source, CanConfig&
   defaults.tpdo.add(PdoObject::PositionActual);
   YAML::Node nodes, buses;
   for (const auto& kv : root) {
-    const std::string k = kv.first.as<std::string>();
+    const std::string k = manip::yaml::scalar_text(kv.first);
     if (k == "master") read_master(r, kv.second, cfg.master);
     else if (k == "defaults") read_drive(r, kv.second, "defaults", defaults, true);
     else if (k == "buses") buses = kv.second;
@@ -301,14 +306,14 @@ bool parse_config(const std::string& text, const std::string& source, CanConfig&
   } else {
     for (const auto& kv : buses) {
       BusConfig b;
-      b.name = kv.first.as<std::string>();
+      b.name = manip::yaml::scalar_text(kv.first);
       const std::string prefix = "buses." + b.name;
       if (!kv.second.IsMap()) {
         r.fail(kv.second, prefix, "expected a mapping");
         continue;
       }
       for (const auto& f : kv.second) {
-        const std::string k = f.first.as<std::string>();
+        const std::string k = manip::yaml::scalar_text(f.first);
         if (k == "interface") r.text(f.second, prefix + ".interface", b.interface);
         else if (k == "bitrate") r.integer(f.second, prefix + ".bitrate", b.bitrate, 10000, 1000000);
         else r.fail(f.first, prefix + "." + k, "unknown key (allowed: interface, bitrate)");
@@ -325,7 +330,7 @@ bool parse_config(const std::string& text, const std::string& source, CanConfig&
   } else {
     for (const auto& kv : nodes) {
       DriveConfig d = defaults;
-      d.name = kv.first.as<std::string>();
+      d.name = manip::yaml::scalar_text(kv.first);
       const std::string prefix = "nodes." + d.name;
       read_drive(r, kv.second, prefix, d, false);
       const YAML::Node& at = kv.second;
@@ -359,6 +364,19 @@ bool parse_config(const std::string& text, const std::string& source, CanConfig&
   if (errors.size() != errors_before) return false;
   out = std::move(cfg);
   return true;
+}
+}  // namespace
+
+bool parse_config(const std::string& text, const std::string& source, CanConfig& out,
+                  std::vector<std::string>& errors) {
+  // A second line of defence (fuzz_can_config found a key that was a mapping):
+  // whatever yaml-cpp throws on hostile input becomes a refusal naming the file.
+  try {
+    return parse_config_checked(text, source, out, errors);
+  } catch (const YAML::Exception& e) {
+    errors.push_back(source + ":" + std::to_string(e.mark.line + 1) + ": <yaml>: " + e.msg);
+    return false;
+  }
 }
 
 bool load_config(const std::string& path, CanConfig& out, std::vector<std::string>& errors) {

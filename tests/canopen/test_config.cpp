@@ -106,3 +106,15 @@ TEST_CASE("canopen config: the shipped example tests/canopen/bus.yml") {
   CHECK(c.drives[1].max_torque_permille == 800u);
   CHECK(c.drives[0].abort_connection_option == 1);
 }
+
+TEST_CASE("canopen config: hostile YAML is refused, never thrown (found by fuzz_can_config)") {
+  // A mapping used as a key made yaml-cpp's as<std::string>() throw through
+  // parse_config; a duplicate key was silently resolved to its first value.
+  const std::string mapping_key = "master:\n  ? {a: 1}\n  : 2\n";
+  const auto e1 = errors_of(mapping_key);
+  REQUIRE(!e1.empty());
+  CHECK(e1[0].rfind("bus.yml:", 0) == 0);
+  const auto e2 = errors_of("master:\n  node_id: 1\n  node_id: 2\n");
+  REQUIRE(!e2.empty());
+  CHECK(e2[0] == "bus.yml:3: master.node_id: duplicate key (given twice in one mapping)");
+}
