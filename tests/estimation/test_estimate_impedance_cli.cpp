@@ -21,20 +21,7 @@ using namespace manip;
 namespace {
 const std::string kApp = std::string(MANIP_BINARY_DIR) + "/apps/estimate_impedance";
 
-int run(const std::string& args, std::string* output = nullptr) {
-  const std::string out =
-      (std::filesystem::temp_directory_path() / ("estimate_cli_out_" + std::to_string(::getpid()) + ".txt")).string();
-  const std::string cmd = kApp + " " + args + " >" + out + " 2>&1";
-  const int st = std::system(cmd.c_str());
-  if (output) {
-    std::ifstream in(out);
-    std::ostringstream os;
-    os << in.rdbuf();
-    *output = os.str();
-  }
-  std::filesystem::remove(out);
-  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
+int run(const std::string& args, std::string* output = nullptr) { return testutil::run_command(kApp + " " + args, output); }
 }  // namespace
 
 TEST_CASE("estimate_impedance: exit codes of the executable", "[cli]") {

@@ -22,6 +22,8 @@
 #include "manip/hardware/can_backend.hpp"
 #include "manip/runtime/config.hpp"
 
+#include "fixtures.hpp"
+
 namespace hw = manip::hardware;
 namespace cc = manip::canopen;
 namespace bs = manip::control::backend_status;
@@ -316,16 +318,8 @@ TEST_CASE("can backend: the real-time path does not allocate", "[can_backend][no
 
 namespace {
 int run_app(const std::string& args, std::string& output) {
-  const std::string out =
-      (std::filesystem::temp_directory_path() / ("manip_can_rt_" + std::to_string(::getpid()) + ".txt")).string();
-  const std::string cmd = "cd " + kSrc + " && " + std::string(MANIP_BINARY_DIR) + "/apps/manip_rt " + args + " >" + out + " 2>&1";
-  const int st = std::system(cmd.c_str());
-  std::ifstream in(out);
-  std::ostringstream os;
-  os << in.rdbuf();
-  output = os.str();
-  std::filesystem::remove(out);
-  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return manip::testutil::run_command(
+      "cd " + kSrc + " && " + std::string(MANIP_BINARY_DIR) + "/apps/manip_rt " + args, &output);
 }
 }  // namespace
 

@@ -11,21 +11,13 @@
 #include <fstream>
 #include <sstream>
 
+#include "fixtures.hpp"
+
 namespace {
 const std::string kApp = std::string(MANIP_BINARY_DIR) + "/apps/manip_rt";
 
 int run(const std::string& args, std::string* output = nullptr) {
-  const std::string out = (std::filesystem::temp_directory_path() / ("manip_rt_cli_out_" + std::to_string(::getpid()) + ".txt")).string();
-  const std::string cmd = "cd " + std::string(MANIP_SOURCE_DIR) + " && " + kApp + " " + args + " >" + out + " 2>&1";
-  const int st = std::system(cmd.c_str());
-  if (output) {
-    std::ifstream in(out);
-    std::ostringstream os;
-    os << in.rdbuf();
-    *output = os.str();
-  }
-  std::filesystem::remove(out);
-  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return manip::testutil::run_command("cd " + std::string(MANIP_SOURCE_DIR) + " && " + kApp + " " + args, output);
 }
 }  // namespace
 

@@ -1,6 +1,9 @@
 #include "fixtures.hpp"
 
+#include <sys/wait.h>
 #include <unistd.h>
+
+#include <cstdlib>
 
 #include <filesystem>
 #include <fstream>
@@ -43,6 +46,20 @@ std::string temp_dir(const std::string& name) {
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir.string();
+}
+
+int run_command(const std::string& command, std::string* output) {
+  const std::string out =
+      (std::filesystem::temp_directory_path() / ("manip_test_cmd_" + std::to_string(::getpid()) + ".txt")).string();
+  const int st = std::system((command + " >" + out + " 2>&1").c_str());
+  if (output) {
+    std::ifstream in(out);
+    std::ostringstream os;
+    os << in.rdbuf();
+    *output = os.str();
+  }
+  std::filesystem::remove(out);
+  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
 }
 
 }  // namespace manip::testutil
