@@ -13,6 +13,7 @@
 #include "manip/runtime/bus.hpp"
 #include "manip/state_t.hpp"
 #include "manip/targets_t.hpp"
+#include "../control/memq_rig.hpp"
 #include "../control/test_support.hpp"
 
 using manip::Vec2;
@@ -43,18 +44,11 @@ TEST_CASE("bus: MANIP_TARGETS follows SET_TARGETS at once, refused ones never", 
   cfg.protocol.autostart = false;  // IDLE: SET_TARGETS allowed, no trial starts by itself
   cfg.safety.max_tracking_error_m = 10.0;
   cfg.safety.max_motor_force_n = 1e12;
-  RecordQueue log(1 << 16), busq(4096);
-  CommandQueue cmds(64);
-  Controller ctl(cfg, {&log, &busq, &cmds}, ControllerOptions{false, false, 0, 0});
-  Bus bus(cfg, Bus::Links{&busq, &cmds, &ctl.status(), nullptr, nullptr});
-  std::string err;
-  REQUIRE(bus.open("memq://", err));
+  test_support::MemqRig rig(cfg);
+  auto& ctl = rig.ctl;
+  auto& bus = rig.bus;
   std::vector<manip::targets_t> got;
-  struct H {
-    std::vector<manip::targets_t>* out;
-    void on(const lcm::ReceiveBuffer*, const std::string&, const manip::targets_t* m) { out->push_back(*m); }
-  } h{&got};
-  bus.lcm()->subscribe(manip::channels::kTargets, &H::on, &h);
+  rig.collect(manip::channels::kTargets, got);
   std::int64_t k = 0;
   auto cycle = [&](int n) {
     for (int i = 0; i < n; ++i, ++k) ctl.step(test_support::reading(k, Vec2::Zero()), k);

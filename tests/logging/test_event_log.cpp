@@ -35,14 +35,7 @@ struct Counter final : logging::SessionHandler {
   void on_warning(const std::string& m) override { warnings.push_back(m); }
 };
 const std::string& good_log() {
-  static const std::string path = [] {
-    const auto dir = testutil::temp_dir("event_log");
-    auto d = testutil::small_design(9);
-    d.write_twins = false;
-    const auto rec = testutil::record(d, sim::table1_person());
-    testutil::write_recorded(rec, dir + "/good.lcm");
-    return dir + "/good.lcm";
-  }();
+  static const std::string path = testutil::write_small_good_log("event_log");
   return path;
 }
 }  // namespace

@@ -86,14 +86,7 @@ struct Seen final : logging::SessionHandler {
 };
 
 const std::string& good_log() {
-  static const std::string path = [] {
-    const auto dir = testutil::temp_dir("log_hardening");
-    auto d = testutil::small_design(9);
-    d.write_twins = false;
-    const auto rec = testutil::record(d, sim::table1_person());
-    testutil::write_recorded(rec, dir + "/good.lcm");
-    return dir + "/good.lcm";
-  }();
+  static const std::string path = testutil::write_small_good_log("log_hardening");
   return path;
 }
 

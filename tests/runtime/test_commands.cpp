@@ -15,6 +15,7 @@
 #include "manip/control/controller.hpp"
 #include "manip/runtime/messages.hpp"
 #include "manip/trial_event_t.hpp"
+#include "../control/memq_rig.hpp"
 #include "../control/test_support.hpp"
 
 using manip::Vec2;
@@ -239,18 +240,11 @@ TEST_CASE("bus: commands over LCM (memq), garbage and statuses", "[commands][bus
   return;
 #endif
   RtConfig cfg = manual_start();
-  RecordQueue log(1 << 16), busq(4096);
-  CommandQueue cmds(64);
-  Controller ctl(cfg, {&log, &busq, &cmds}, ControllerOptions{false, false, 0, 0});
-  Bus bus(cfg, Bus::Links{&busq, &cmds, &ctl.status(), nullptr, nullptr});
-  std::string err;
-  REQUIRE(bus.open("memq://", err));
+  test_support::MemqRig rig(cfg);
+  auto& ctl = rig.ctl;
+  auto& bus = rig.bus;
   std::vector<manip::command_status_t> statuses;
-  struct H {
-    std::vector<manip::command_status_t>* out;
-    void on(const lcm::ReceiveBuffer*, const std::string&, const manip::command_status_t* m) { out->push_back(*m); }
-  } h{&statuses};
-  bus.lcm()->subscribe(manip::channels::kCommandStatus, &H::on, &h);
+  rig.collect(manip::channels::kCommandStatus, statuses);
 
   const std::uint8_t junk[] = {0xde, 0xad, 0xbe, 0xef, 0x00, 0x11};
   bus.lcm()->publish(manip::channels::kCommand, junk, sizeof junk);

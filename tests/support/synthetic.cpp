@@ -1,5 +1,8 @@
 #include "synthetic.hpp"
 
+#include "fixtures.hpp"
+#include "manip/sim/presets.hpp"
+
 namespace manip::testutil {
 
 sim::SessionDesign small_design(int movements, std::uint64_t seed) {
@@ -67,6 +70,14 @@ MemorySession simulate_in_memory(const sim::SessionDesign& d, const sim::LinearH
   ms.info = asmb.session();
   ms.issues = asmb.issues();
   return ms;
+}
+
+std::string write_small_good_log(const std::string& tag) {
+  const auto dir = temp_dir(tag);
+  auto d = small_design(9);
+  d.write_twins = false;
+  write_recorded(record(d, sim::table1_person()), dir + "/good.lcm");
+  return dir + "/good.lcm";
 }
 
 }  // namespace manip::testutil

@@ -34,5 +34,8 @@ struct Recorded {
 };
 Recorded record(const sim::SessionDesign& d, const sim::LinearHumanParams& p);
 void write_recorded(const Recorded& r, const std::string& path, bool with_session = true);
+// A small good log (9 movements of the Table-1 person, no twins) written once
+// into temp_dir(tag): the reference input the log-reader tests damage.
+std::string write_small_good_log(const std::string& tag);
 
 }  // namespace manip::testutil
