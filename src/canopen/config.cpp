@@ -188,6 +188,7 @@ void read_master(Reader& r, const YAML::Node& n, MasterConfig& m) {
     else if (k == "boot_timeout_ms") r.integer(v, key, m.boot_timeout_ms, 1, 600000);
     else if (k == "sdo_timeout_ms") r.integer(v, key, m.sdo_timeout_ms, 1, 60000);
     else if (k == "enable_timeout_ms") r.integer(v, key, m.enable_timeout_ms, 1, 60000);
+    else if (k == "fault_reset_timeout_ms") r.integer(v, key, m.fault_reset_timeout_ms, 1, 60000);
     else if (k == "max_bus_load") r.real(v, key, m.max_bus_load, 0.01, 1.0);
     else if (k == "tpdo_miss_limit") r.integer(v, key, m.tpdo_miss_limit, 1, 1000);
     else if (k == "emcy_headroom_hz") r.real(v, key, m.emcy_headroom_hz, 0.0, 10000.0);
@@ -260,6 +261,8 @@ void read_backend(Reader& r, const YAML::Node& n, BackendOptions& b) {
     else if (k == "netft_counts_per_force") r.real(v, key, b.netft_counts_per_force, 1e-6, 1e12);
     else if (k == "jr3_device") r.text(v, key, b.jr3_device);
     else if (k == "jr3_filter") r.integer(v, key, b.jr3_filter, 0, 6);
+    else if (k == "record_raw_frames") r.boolean(v, key, b.record_raw_frames);
+    else if (k == "raw_queue_frames") r.integer(v, key, b.raw_queue_frames, 1024, 4u << 20);
     else r.fail(kv.first, key, "unknown key");
   }
 }

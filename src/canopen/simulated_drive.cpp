@@ -236,13 +236,16 @@ void SimulatedDrive::apply_controlword(uint16_t cw) {
 
 void SimulatedDrive::step_state_machine() {
   const auto before = state_;
-  auto st = cia402::drive_step(state_, controlword_, prev_controlword_, fault_pending_);
+  // A persisting cause keeps the drive in Fault whatever the controlword.
+  const bool cause = faults_.fault_persists && (state_ == cia402::State::Fault || state_ == cia402::State::FaultReactionActive);
+  auto st = cia402::drive_step(state_, controlword_, prev_controlword_, fault_pending_ || cause);
   state_ = st.state;
   if (fault_pending_) {  // fault reaction is immediate in the simulation (13 then 14)
     state_ = cia402::drive_step(state_, controlword_, prev_controlword_, true).state;
     fault_pending_ = false;
   }
   if (before == cia402::State::Fault && state_ == cia402::State::SwitchOnDisabled) {
+    ++fault_resets_;
     if (Entry* e = find(0x1001, 0)) e->value = 0;
     if (Entry* e = find(0x1002, 0)) e->value = 0;
     reset_emcy_pending_ = true;  // EMCY 0x0000 "error reset"

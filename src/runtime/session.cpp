@@ -245,6 +245,7 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
     logger.set_fault_sink([b = bus.get()](const manip::fault_t& f) { b->publish_fault(f); });
   }
   logger.set_aux_queue(want_log && want_bus ? &aux_q : nullptr);
+  logger.set_backend_tap(want_log ? backend.log_tap() : nullptr);
 
   // --- backend: configure (slow, may fail; drives disabled), then enable --------
   try {

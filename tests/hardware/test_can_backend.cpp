@@ -9,6 +9,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -18,6 +20,8 @@
 #include "sanitized.hpp"
 
 #include "manip/canopen/error.hpp"
+#include "manip/command_t.hpp"
+#include "manip/control/controller.hpp"
 #include "manip/estimation/session_estimator.hpp"
 #include "manip/hardware/can_backend.hpp"
 #include "manip/runtime/config.hpp"
@@ -235,6 +239,7 @@ TEST_CASE("can backend: faults mid-session reach the safe state within one SYNC 
   std::string reason_word;
   std::uint32_t bit = 0;
   int max_cycles = 8;
+  bool acknowledgeable = true;  // the operator's FAULT_RESET can clear it (no restart)
   SECTION("drive enters Fault") {
     b.sim_drive(0)->enter_fault(0x2310, 0);  // continuous over-current
     bit = bs::kDriveFault;
@@ -250,6 +255,7 @@ TEST_CASE("can backend: faults mid-session reach the safe state within one SYNC 
     bit = bs::kBackendError;
     reason_word = "heartbeat";
     max_cycles = 4 * 200;  // consumer time 150 ms
+    acknowledgeable = false;
   }
   SECTION("TPDOs stop") {
     b.sim_drive(0)->faults().drop_all_tpdos = true;
@@ -261,9 +267,19 @@ TEST_CASE("can backend: faults mid-session reach the safe state within one SYNC 
   REQUIRE(n > 0);
   CHECK(b.fault_reason().find(reason_word) != std::string::npos);
   check_safe_next_cycle(l);
-  // latched: stays raised
-  l.cycle();
-  CHECK((l.r.status & bit) != 0);
+  // Latched: the master holds the safe state and the reason until the
+  // operator's reset. An acknowledgeable fault raised its bit in the
+  // detecting cycle (the supervisor latches it) and is no longer "present",
+  // so FAULT_RESET can be accepted; one that needs a restart stays present.
+  for (int i = 0; i < 40; ++i) l.cycle();
+  CHECK(b.drives().faulted());
+  CHECK(b.fault_reason().find(reason_word) != std::string::npos);
+  CHECK(((l.r.status & bit) != 0) == !acknowledgeable);
+  CHECK(b.drives().fault_acknowledgeable() == acknowledgeable);
+  for (int a = 0; a < 2; ++a) {
+    CHECK(b.sim_drive(a)->state() != cc::cia402::State::OperationEnabled);
+    CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
+  }
 }
 
 TEST_CASE("can backend: a warning EMCY (temperature class) is logged by the master, no fault", "[can_backend]") {
@@ -300,20 +316,35 @@ TEST_CASE("can backend: e-stop / STO reported by the drive is a latched hardware
 
 TEST_CASE("can backend: the real-time path does not allocate", "[can_backend][no_alloc]") {
   const auto cfg = rt_cfg();
-  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  auto can = can_cfg();
+  // Raw-frame recording on, with a queue nobody drains here: the drop path too.
+  can.backend.record_raw_frames = true;
+  can.backend.raw_queue_frames = 1024;
+  hw::CanBackend b(cfg, cfg.sim, can);
   started(b);
   Loop l{b};
   for (int i = 0; i < 100; ++i) l.cycle(Vec2(3.0, -3.0));
   manip::test::AllocCounts got;
+  bool faulted = false, raised = false;
   {
     const manip::test::ThreadAllocScope s;
     for (int i = 0; i < 4000; ++i) l.cycle(Vec2(3.0, -3.0));
     b.sim_drive(0)->enter_fault(0x2310, 0);  // the fault path too
-    for (int i = 0; i < 20; ++i) l.cycle();
+    for (int i = 0; i < 20; ++i) {
+      l.cycle();
+      raised |= (l.r.status & bs::kDriveFault) != 0;
+    }
+    faulted = b.drives().faulted();
+    b.request_fault_reset();  // ... and the operator's reset, re-enable included
+    for (int i = 0; i < 400; ++i) l.cycle(Vec2(3.0, -3.0));
     got = s.counts();
   }
   CHECK(got.news == 0);
-  CHECK((l.r.status & bs::kDriveFault) != 0);
+  CHECK(raised);
+  CHECK(faulted);
+  CHECK(l.r.status == bs::kDrivesEnabled);
+  CHECK(b.raw_frames_dropped() > 0);
+  CHECK(b.recorder()->size_approx() == b.recorder()->capacity());
 }
 
 namespace {
@@ -443,4 +474,182 @@ TEST_CASE("can backend in run_session: a drive fault mid-session ends it with th
   CHECK(can_b.fault_reason().find(word) != std::string::npos);
   REQUIRE(b.first_fault_ > 0);
   for (int a = 0; a < 2; ++a) CHECK(can_b.sim_drive(a)->applied_force_n() == 0.0);
+}
+
+// ---------------------------------------------------------------------------
+// Operator fault reset (docs/hardware.md "Operator fault reset").
+
+namespace {
+// The loop as manip_rt runs it (runtime::RtCycle: read -> Controller::step ->
+// write, the supervisor's accepted FAULT_RESET -> backend.request_fault_reset),
+// cycle by cycle, with the operator's commands through the command queue.
+struct SupervisedLoop {
+  explicit SupervisedLoop(const manip::runtime::RtConfig& c, hw::CanBackend& backend)
+      : cfg(c),
+        log(c.loop.log_queue_capacity),
+        bus(c.loop.bus_queue_capacity),
+        cmds(c.loop.command_queue_capacity),
+        ctl(c, {&log, &bus, &cmds}, manip::control::ControllerOptions{false, false, 0, 1'700'000'000'000'000}),
+        b(backend),
+        body(backend, ctl) {}
+  const manip::runtime::RtConfig& cfg;
+  manip::runtime::RecordQueue log, bus;
+  manip::runtime::CommandQueue cmds;
+  manip::control::Controller ctl;
+  hw::CanBackend& b;
+  manip::runtime::RtCycle body;
+  std::int64_t k{0};
+  std::vector<manip::control::CommandResultRecord> results;
+  std::vector<manip::control::FaultRecord> faults;
+  void run(int n) {
+    for (int i = 0; i < n; ++i) body.run_cycle(k++, false);
+    manip::control::LoopRecord r;
+    while (log.try_pop(r)) {
+      if (auto* c = std::get_if<manip::control::CommandResultRecord>(&r)) results.push_back(*c);
+      if (auto* f = std::get_if<manip::control::FaultRecord>(&r)) faults.push_back(*f);
+    }
+    while (bus.try_pop(r)) {
+    }
+  }
+  void command(std::int8_t kind) {
+    manip::control::Command c;
+    c.kind = kind;
+    c.seq = k;
+    REQUIRE(cmds.try_push(c));
+  }
+  // Cycles until pred() holds; -1 if not within max.
+  template <class P>
+  int until(P pred, int max) {
+    for (int i = 1; i <= max; ++i) {
+      run(1);
+      if (pred()) return i;
+    }
+    return -1;
+  }
+  manip::control::Mode mode() const { return ctl.mode(); }
+};
+}  // namespace
+
+TEST_CASE("can backend: operator FAULT_RESET clears a drive fault, re-enables the drives and torque flows again",
+          "[can_backend][fault_reset]") {
+  using manip::control::Mode;
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  started(b);
+  SupervisedLoop s(cfg, b);
+  s.run(2000);  // 0.5 s: INIT -> RUNNING (autostart), the person holds the handle
+  REQUIRE(s.mode() == Mode::kRunning);
+  REQUIRE(s.body.reading().status == bs::kDrivesEnabled);
+  cc::SimulatedDrive& d = *b.sim_drive(0);
+
+  d.enter_fault(0x2310, 0);  // over-current: CiA 402 Fault + faulting EMCY
+  REQUIRE(s.until([&] { return s.mode() == Mode::kFault; }, 8) > 0);
+  s.run(2);  // within one SYNC period: both drives disabled, no force
+  for (int a = 0; a < 2; ++a) {
+    CHECK(b.sim_drive(a)->state() != cc::cia402::State::OperationEnabled);
+    CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
+  }
+  REQUIRE(s.faults.size() == 1);
+  CHECK((s.faults[0].new_flags & manip::control::fault::kBackend) != 0);
+
+  // Nobody resets: the drive stays in Fault, bit 7 is never set, the
+  // supervisor stays in FAULT (safe law) and the master keeps zero torque.
+  s.run(4000);
+  CHECK(d.state() == cc::cia402::State::Fault);
+  CHECK(d.fault_resets() == 0);
+  CHECK((d.controlword() & cc::cia402::cw::kFaultResetBit) == 0);
+  CHECK(s.mode() == Mode::kFault);
+  CHECK((s.body.reading().status & bs::kDriveFault) == 0);  // latched, acknowledgeable: not "present"
+
+  // The operator's FAULT_RESET: accepted, one rising edge, Switch on
+  // disabled, transitions 2-3-4 back to Operation enabled (within
+  // enable_timeout_ms), the session held in PAUSED until RESUME.
+  s.command(manip::command_t::FAULT_RESET);
+  s.run(1);
+  REQUIRE_FALSE(s.results.empty());
+  CHECK(s.results.back().kind == manip::command_t::FAULT_RESET);
+  CHECK(s.results.back().accepted);
+  CHECK(s.mode() == Mode::kPaused);
+  const int n = s.until([&] { return (s.body.reading().status & bs::kDrivesEnabled) != 0; }, 4 * 500);
+  INFO("cycles to Operation enabled after the reset: " << n);
+  REQUIRE(n > 0);
+  CHECK(d.fault_resets() == 1);  // exactly one edge
+  CHECK(d.state() == cc::cia402::State::OperationEnabled);
+  CHECK_FALSE(b.drives().faulted());
+  CHECK(b.fault_reason().empty());  // acknowledged: the next fault gets a fresh reason
+  CHECK(s.mode() == Mode::kPaused);  // hold: admittance, no trials
+  s.command(manip::command_t::RESUME);
+  double max_force = 0;
+  for (int i = 0; i < 4000; ++i) {
+    s.run(1);
+    max_force = std::max(max_force, std::abs(d.applied_force_n()));
+  }
+  CHECK(s.mode() == Mode::kRunning);
+  CHECK(s.body.reading().status == bs::kDrivesEnabled);
+  CHECK(max_force > 0.5);  // torque flows again: the admittance renders the person's push
+  CHECK(s.faults.size() == 1);
+}
+
+TEST_CASE("can backend: a reset that cannot clear never does; a fault that needs a restart refuses the reset",
+          "[can_backend][fault_reset]") {
+  using manip::control::Mode;
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  started(b);
+  SupervisedLoop s(cfg, b);
+  s.run(2000);
+  REQUIRE(s.mode() == Mode::kRunning);
+
+  SECTION("the drive's cause persists: one edge, still Fault, raised again with its reason") {
+    cc::SimulatedDrive& d = *b.sim_drive(1);
+    d.faults().fault_persists = true;
+    d.enter_fault(0x4310, 0);  // drive over-temperature (a warning EMCY, but the drive trips: Fault)
+    REQUIRE(s.until([&] { return s.mode() == Mode::kFault; }, 8) > 0);
+    s.run(400);
+    s.command(manip::command_t::FAULT_RESET);
+    s.run(1);
+    REQUIRE(s.results.back().accepted);
+    // fault_reset_timeout_ms (20 ms) later: raised again, with the reason
+    const int back = s.until([&] { return s.mode() == Mode::kFault; }, 4 * 100);
+    REQUIRE(back > 0);
+    CHECK(back >= 4 * 20);
+    CHECK(d.fault_resets() == 0);
+    CHECK(d.state() == cc::cia402::State::Fault);
+    INFO("reason: " << b.fault_reason() << "; supervisor faults " << s.faults.size() << ", last flags " << s.faults.back().new_flags);
+    CHECK(b.fault_reason().find("fault reset did not clear") != std::string::npos);
+    CHECK(b.fault_reason().find("node 1") != std::string::npos);
+    // No further edges behind the operator's back.
+    int edges = 0;
+    std::uint16_t prev = d.controlword();
+    for (int i = 0; i < 2000; ++i) {
+      s.run(1);
+      const std::uint16_t c = d.controlword();
+      edges += (c & 0x80) && !(prev & 0x80);
+      prev = c;
+    }
+    CHECK(edges == 0);
+    CHECK(d.state() == cc::cia402::State::Fault);
+    // The cause gone, a second reset clears it.
+    d.faults().fault_persists = false;
+    s.command(manip::command_t::FAULT_RESET);
+    s.run(1);
+    CHECK(s.results.back().accepted);
+    REQUIRE(s.until([&] { return (s.body.reading().status & bs::kDrivesEnabled) != 0; }, 4 * 500) > 0);
+    CHECK(d.fault_resets() == 1);
+    CHECK(d.state() == cc::cia402::State::OperationEnabled);
+  }
+  SECTION("heartbeat loss: condition present, reset refused, drives stay disabled") {
+    b.sim_drive(0)->faults().heartbeat_stopped = true;
+    REQUIRE(s.until([&] { return s.mode() == Mode::kFault; }, 4 * 200) > 0);
+    s.run(40);
+    s.command(manip::command_t::FAULT_RESET);
+    s.run(1);
+    REQUIRE_FALSE(s.results.empty());
+    CHECK_FALSE(s.results.back().accepted);
+    CHECK(s.results.back().reason == manip::control::Reject::kConditionPresent);
+    s.run(400);
+    CHECK(s.mode() == Mode::kFault);
+    CHECK(b.drives().faulted());
+    for (int a = 0; a < 2; ++a) CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
+  }
 }

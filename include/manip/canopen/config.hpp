@@ -38,6 +38,7 @@ struct MasterConfig {
   uint32_t boot_timeout_ms = 3000;    // deadline for each node's boot-up after NMT reset
   uint32_t sdo_timeout_ms = 100;
   uint32_t enable_timeout_ms = 500;   // CiA 402 to Operation enabled
+  uint32_t fault_reset_timeout_ms = 20;  // a drive still in Fault this long after the reset edge: reset failed
   double max_bus_load = 0.70;         // refuse to start above this worst-case load
   uint32_t tpdo_miss_limit = 2;       // consecutive SYNC periods without TPDO -> fault
   double emcy_headroom_hz = 10.0;     // reserved EMCY frames per node and second in the budget
@@ -98,6 +99,11 @@ struct BackendOptions {
   double netft_counts_per_force = 1000000.0;  // Net F/T "counts per force" (its web page / calibration)
   std::string jr3_device = "/dev/jr3";  // jr3pci driver character device
   int jr3_filter = 1;                   // JR3 DSP filter 0..6 (0 = raw)
+  // Raw CAN traffic into the session log (channel MANIP_CAN_RAW, can_frames_t):
+  // every frame sent and received, through a preallocated lock-free queue of
+  // raw_queue_frames frames the logger thread drains; overflow is counted.
+  bool record_raw_frames = false;
+  uint32_t raw_queue_frames = 65536;
 };
 
 struct CanConfig {
