@@ -19,7 +19,11 @@
 #include "alloc_counter.hpp"
 #include "sanitized.hpp"
 
+#include "manip/can_frames_t.hpp"
 #include "manip/canopen/error.hpp"
+#include "manip/common/channels.hpp"
+#include "manip/fault_t.hpp"
+#include "manip/logging/event_log.hpp"
 #include "manip/command_t.hpp"
 #include "manip/control/controller.hpp"
 #include "manip/estimation/session_estimator.hpp"
@@ -423,6 +427,8 @@ class Injecting final : public hw::Backend {
   }
   void write(const manip::control::ActuatorCommand& c) override { in_.write(c); }
   void display(const manip::control::DisplayCue& c) override { in_.display(c); }
+  void request_fault_reset() noexcept override { in_.request_fault_reset(); }
+  hw::BackendLogTap* log_tap() noexcept override { return in_.log_tap(); }
   std::int64_t first_fault_{-1};
 
  private:
@@ -652,4 +658,180 @@ TEST_CASE("can backend: a reset that cannot clear never does; a fault that needs
     CHECK(b.drives().faulted());
     for (int a = 0; a < 2; ++a) CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
   }
+}
+
+TEST_CASE("can backend in run_session: the CANopen reason and the raw CAN traffic are in the log",
+          "[can_backend][session][log]") {
+  const auto base = rt_cfg();
+  const auto cfg = manip::runtime::load_rt_config(kSrc + "/config/rt.yaml", manip::runtime::trials_overrides(base, 2));
+  auto can = can_cfg();
+  can.backend.record_raw_frames = true;
+  hw::CanBackend can_b(cfg, cfg.sim, can);
+  Injecting b(can_b, 8000, [](hw::CanBackend& x) { x.sim_drive(1)->enter_fault(0x2310, 0); });
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("manip_can_log_" + std::to_string(::getpid()) + ".lcm")).string();
+  auto opt = offline_run_options(path);
+  opt.exit_on_fault = true;
+  std::ostringstream out;
+  const auto rep = manip::runtime::run_session(cfg, b, opt, out);
+  INFO(out.str());
+  REQUIRE(rep.exit_code == 7);
+
+  std::vector<manip::fault_t> faults;
+  std::int64_t frames = 0, batches = 0, dropped = -1, last_cycle = -1;
+  std::int64_t startup_frames = 0, sdo_in_loop = 0, sdo_at_startup = 0, emcy_cycle = -2, fault_tpdo_cycle = -2;
+  std::int64_t syncs[2] = {0, 0}, tpdo1[2] = {0, 0};
+  std::vector<std::string> ifaces;
+  {
+    manip::logging::EventLogReader rd(path);
+    manip::logging::RawEvent ev;
+    while (rd.next(ev)) {
+      const auto n = static_cast<int>(ev.data.size());
+      if (ev.channel == manip::channels::kFault) {
+        manip::fault_t f;
+        REQUIRE(f.decode(ev.data.data(), 0, n) == n);
+        faults.push_back(f);
+      } else if (ev.channel == manip::channels::kState) {
+        manip::state_t st;
+        REQUIRE(st.decode(ev.data.data(), 0, n) == n);
+        last_cycle = st.cycle;
+      } else if (ev.channel == manip::channels::kCanRaw) {
+        manip::can_frames_t m;
+        REQUIRE(m.decode(ev.data.data(), 0, n) == n);
+        ++batches;
+        frames += m.n;
+        dropped = m.dropped_total;
+        ifaces = m.interfaces;
+        for (int i = 0; i < m.n; ++i) {
+          const bool tx = m.flags[i] & manip::can_frames_t::FLAG_TX;
+          const std::uint32_t id = static_cast<std::uint32_t>(m.id[i]);
+          const int bus = m.iface[i];
+          REQUIRE((bus == 0 || bus == 1));
+          const bool sdo = (id & 0x780) == 0x580 || (id & 0x780) == 0x600;
+          if (m.cycle[i] < 0) {
+            ++startup_frames;
+            sdo_at_startup += sdo;
+          } else {
+            sdo_in_loop += sdo;
+            if (tx && id == 0x080) ++syncs[bus];
+            if (!tx && id == 0x181) ++tpdo1[bus];
+            if (!tx && id == 0x081 && bus == 1 && emcy_cycle == -2) emcy_cycle = m.cycle[i];
+            // statusword (first 2 bytes of TPDO1) with the CiA 402 Fault bit 3
+            if (!tx && id == 0x181 && bus == 1 && fault_tpdo_cycle == -2 && (m.data[i][0] & 0x08))
+              fault_tpdo_cycle = m.cycle[i];
+          }
+        }
+      }
+    }
+  }
+  std::filesystem::remove(path);
+
+  // The decoded CANopen reason is in the supervisor's fault record of the cycle.
+  REQUIRE_FALSE(faults.empty());
+  INFO("fault reason: " << faults.front().reason);
+  CHECK(faults.front().reason.find("backend") == 0);
+  CHECK(faults.front().reason.find("; can backend: node 1: ") != std::string::npos);
+  CHECK(faults.front().reason.find("Fault (statusword 0x") != std::string::npos);
+  CHECK(rep.log.backend_notes >= 1);
+
+  // Raw traffic: every frame, candump-like, aligned with the states' cycles.
+  INFO("raw frames " << frames << " in " << batches << " batches; start-up " << startup_frames << "; SYNC " << syncs[0]
+                     << "/" << syncs[1] << ", TPDO1 " << tpdo1[0] << "/" << tpdo1[1] << "; last cycle " << last_cycle);
+  CHECK(ifaces == std::vector<std::string>{"can0", "can1"});
+  CHECK(dropped == 0);
+  CHECK(frames == rep.log.raw_frames);
+  CHECK(sdo_at_startup > 50);  // the SDO start-up list (both drives)
+  CHECK(sdo_in_loop == 0);     // never an SDO in the cyclic phase
+  for (int bus = 0; bus < 2; ++bus) {
+    // one SYNC per drive tick (2 kHz of the 4 kHz loop) up to the fault,
+    // then the master's safe SYNCs until the loop stops
+    CHECK(std::abs(syncs[bus] - (last_cycle + 1) / 2) <= 4);
+    CHECK(std::abs(tpdo1[bus] - syncs[bus]) <= 4);
+  }
+  // The TPDO reporting Fault was received in the very cycle the fault record
+  // names; the drive's EMCY (0x2310) is recorded too.
+  CHECK(fault_tpdo_cycle == faults.front().cycle);
+  CHECK(emcy_cycle >= faults.front().cycle);
+}
+
+namespace {
+// A backend's log tap with notes handed in by the test.
+struct FakeTap final : hw::BackendLogTap {
+  std::vector<hw::BackendFaultNote> notes;
+  bool next_fault_note(hw::BackendFaultNote& out) override {
+    if (notes.empty()) return false;
+    out = notes.front();
+    notes.erase(notes.begin());
+    return true;
+  }
+};
+manip::state_t state_at(std::int64_t cycle, std::uint32_t flags) {
+  manip::state_t s{};
+  s.cycle = cycle;
+  s.utime = 1'700'000'000'000'000 + cycle * 250;
+  s.fault_flags = static_cast<std::int32_t>(flags);
+  return s;
+}
+}  // namespace
+
+TEST_CASE("logger: a backend note joins the fault record of its cycle, or gets a record of its own",
+          "[can_backend][log]") {
+  namespace fl = manip::control::fault;
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("manip_notes_" + std::to_string(::getpid()) + ".lcm")).string();
+  manip::runtime::RecordQueue q(64);
+  manip::runtime::Logger logger(q, 4, 10.0);
+  logger.set_print_faults(false);
+  FakeTap tap;
+  logger.set_backend_tap(&tap);
+  std::string err;
+  manip::session_t session{};
+  REQUIRE(logger.open(path, session, err, true));
+  // cycle 10: the backend noted "A"; the supervisor raised kBackend in the same cycle
+  tap.notes.push_back({10, bs::kDriveFault, "can backend: A"});
+  REQUIRE(q.try_push(state_at(9, 0)));
+  manip::control::FaultRecord f;
+  f.cycle = 10;
+  f.new_flags = f.fault_flags = fl::kBackend;
+  REQUIRE(q.try_push(f));
+  REQUIRE(q.try_push(state_at(10, fl::kBackend)));
+  logger.drain();
+  // cycle 20: note "B" with no new supervisor bit (already latched): own record once cycle 21 is seen
+  tap.notes.push_back({20, bs::kBackendError, "can backend: B"});
+  REQUIRE(q.try_push(state_at(20, fl::kBackend)));
+  logger.drain();
+  const auto before_21 = logger.stats().backend_notes;
+  REQUIRE(q.try_push(state_at(21, fl::kBackend)));
+  logger.drain();
+  const auto after_21 = logger.stats().backend_notes;
+  // at shutdown (outside the loop): "C"
+  tap.notes.push_back({-1, bs::kBackendError, "can backend: C"});
+  REQUIRE(logger.close(err));
+  CHECK(before_21 == 1);
+  CHECK(after_21 == 2);
+
+  std::vector<manip::fault_t> faults;
+  {
+    manip::logging::EventLogReader rd(path);
+    manip::logging::RawEvent ev;
+    while (rd.next(ev))
+      if (ev.channel == manip::channels::kFault) {
+        manip::fault_t m;
+        const auto n = static_cast<int>(ev.data.size());
+        REQUIRE(m.decode(ev.data.data(), 0, n) == n);
+        faults.push_back(m);
+      }
+  }
+  std::filesystem::remove(path);
+  REQUIRE(faults.size() == 3);
+  CHECK(faults[0].cycle == 10);
+  CHECK(faults[0].reason.find("backend") == 0);
+  CHECK(faults[0].reason.find("; can backend: A") != std::string::npos);
+  CHECK(faults[0].n_history > 0);
+  CHECK(faults[1].cycle == 20);
+  CHECK(faults[1].reason == "can backend: B");
+  CHECK(faults[1].fault_flags == static_cast<std::int32_t>(fl::kBackend));
+  CHECK(faults[1].n_history == 0);
+  CHECK(faults[2].cycle == -1);
+  CHECK(faults[2].reason == "can backend: C");
 }
