@@ -98,6 +98,7 @@ const DriveSetFeedback& CanDriveSet::read(int64_t now) {
       a.have_prev = ns.has_feedback;
     }
     fb_.statusword[std::size_t(i)] = ns.statusword;
+    fb_.digital_inputs[std::size_t(i)] = ns.digital_inputs;
     fb_.state[std::size_t(i)] = cia402::decode(ns.statusword);
     fb_.enabled &= fb_.state[std::size_t(i)] == cia402::State::OperationEnabled;
   }

@@ -378,6 +378,7 @@ void Master::on_tpdo(int slot, int pdo, const CanFrame& f, FrameBuffer& tx) {
       case PdoObject::Statusword: n.statusword = get_u16(f.data + b); b += 2; break;
       case PdoObject::PositionActual: n.position_counts = static_cast<int32_t>(get_u32(f.data + b)); b += 4; break;
       case PdoObject::VelocityActual: n.velocity_units = static_cast<int32_t>(get_u32(f.data + b)); b += 4; break;
+      case PdoObject::DigitalInputs: n.digital_inputs = get_u32(f.data + b); b += 4; break;
       default: b += object_ref(m.objects[k]).bits / 8; break;
     }
   }

@@ -227,6 +227,8 @@ std::string CanBackend::fault_reason() const {
   n.error = latched_error_;
   n.axis = estop_axis_;
   n.statusword = estop_statusword_;
+  n.by_input = estop_by_input_;
+  n.inputs = estop_inputs_;
   return describe(n);
 }
 
@@ -235,7 +237,14 @@ std::string CanBackend::describe(const Note& n) const {
     case Latch::kNone: return "";
     case Latch::kCanopen: return cc::describe(n.error);
     case Latch::kEStop: {
-      char buf[160];
+      char buf[200];
+      if (n.by_input) {
+        std::snprintf(buf, sizeof buf,
+                      "e-stop chain open: digital input bit %d (0x60FD = 0x%08X) of the drive of workspace axis %d "
+                      "reads the open level (statusword 0x%04X)",
+                      can_.backend.estop_input_bit, n.inputs, n.axis, n.statusword);
+        return buf;
+      }
       std::snprintf(buf, sizeof buf,
                     "e-stop chain open / safe torque off reported by the drive of workspace axis %d (statusword 0x%04X)",
                     n.axis, n.statusword);
@@ -387,8 +396,15 @@ void CanBackend::read(control::SensorReading& out) {
   const auto& bo = can_.backend;
   for (int a = 0; a < 2; ++a) {
     const std::uint16_t sw = fb.statusword[std::size_t(a)];
-    bool open = false;
+    const std::uint32_t di = fb.digital_inputs[std::size_t(a)];
+    bool open = false, by_input = false;
     if (bo.estop_statusword_bit >= 0) open |= (((sw >> bo.estop_statusword_bit) & 1u) != 0) == bo.estop_active_high;
+    // The chain's own contact on a drive input, CiA 402 0x60FD in a TPDO
+    // (fresh every SYNC period).
+    if (bo.estop_input_bit >= 0 && (((di >> bo.estop_input_bit) & 1u) != 0) == bo.estop_input_open_high) {
+      open = true;
+      by_input = true;
+    }
     // CiA 402 0x6041 bit 4 (voltage enabled) gone while Operation enabled: the
     // power stage lost its supply (STO / e-stop contactor).
     if (bo.estop_on_voltage_loss && fb.state[std::size_t(a)] == cc::cia402::State::OperationEnabled &&
@@ -402,6 +418,8 @@ void CanBackend::read(control::SensorReading& out) {
         n.kind = Latch::kEStop;
         n.axis = a;
         n.statusword = sw;
+        n.by_input = by_input;
+        n.inputs = di;
         note(n);
       }
       st |= bs::kHwEStopOpen;
@@ -409,6 +427,8 @@ void CanBackend::read(control::SensorReading& out) {
         latch_ = Latch::kEStop;
         estop_axis_ = a;
         estop_statusword_ = sw;
+        estop_by_input_ = by_input;
+        estop_inputs_ = di;
       }
     }
   }

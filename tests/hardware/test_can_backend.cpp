@@ -835,3 +835,39 @@ TEST_CASE("logger: a backend note joins the fault record of its cycle, or gets a
   CHECK(faults[2].cycle == -1);
   CHECK(faults[2].reason == "can backend: C");
 }
+
+TEST_CASE("can backend: the e-stop chain on digital input 0x60FD (TPDO2) is a latched hardware e-stop with its reason",
+          "[can_backend][estop]") {
+  const auto cfg = rt_cfg();
+  auto can = can_cfg();
+  can.backend.estop_input_bit = 16;          // the chain's contact on the drive's input 16 (manufacturer-specific)
+  can.backend.estop_input_open_high = false;  // closed chain holds it high
+  for (auto& d : can.drives) {  // TPDO2 carries 0x60FD instead of the velocity
+    d.tpdo2 = cc::PdoMapping{};
+    d.tpdo2.add(cc::PdoObject::DigitalInputs);
+  }
+  hw::CanBackend b(cfg, cfg.sim, can);
+  started(b);
+  CHECK(b.budget_text().find("TPDO2") != std::string::npos);
+  CHECK(b.sim_drive(0)->od_value(0x1A01, 1) == 0x60FD0020u);  // mapped by the start-up SDO list
+  Loop l{b};
+  for (int i = 0; i < 400; ++i) l.cycle(Vec2(2.0, 2.0));
+  REQUIRE(l.r.status == bs::kDrivesEnabled);  // closed chain: no e-stop
+  b.sim_drive(1)->faults().digital_inputs &= ~(1u << 16);  // open the chain at the drive of axis 1
+  const int n = l.until(bs::kHwEStopOpen, 4);  // next TPDO2: within 2 SYNC periods
+  INFO(b.fault_reason());
+  REQUIRE(n > 0);
+  CHECK(b.fault_reason().find("e-stop chain open") != std::string::npos);
+  CHECK(b.fault_reason().find("0x60FD") != std::string::npos);
+  CHECK(b.fault_reason().find("axis 1") != std::string::npos);
+  hw::BackendFaultNote note;
+  REQUIRE(b.next_fault_note(note));
+  CHECK(note.status == bs::kHwEStopOpen);
+  CHECK(note.text.find("bit 16") != std::string::npos);
+  for (int i = 0; i < 40; ++i) l.cycle();
+  CHECK((l.r.status & bs::kHwEStopOpen) != 0);  // present while the chain is open
+  b.sim_drive(1)->faults().digital_inputs |= 1u << 16;  // closed again
+  for (int i = 0; i < 4; ++i) l.cycle();
+  CHECK((l.r.status & bs::kHwEStopOpen) == 0);  // not present: the operator may reset
+  CHECK_FALSE(b.fault_reason().empty());         // the reason stays latched until then
+}

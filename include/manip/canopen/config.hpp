@@ -10,7 +10,9 @@
 namespace manip::canopen {
 
 // Objects manip maps into PDOs (CiA 402-2 object numbers).
-enum class PdoObject : uint8_t { Controlword, TargetTorque, Statusword, PositionActual, VelocityActual };
+// DigitalInputs: CiA 402 0x60FD (32 bits; bits 0-3 limit/home/interlock,
+// 16-31 manufacturer-specific, e.g. the input wired to the e-stop chain).
+enum class PdoObject : uint8_t { Controlword, TargetTorque, Statusword, PositionActual, VelocityActual, DigitalInputs };
 struct ObjectRef {
   uint16_t index;
   uint8_t sub;
@@ -84,6 +86,11 @@ struct BackendOptions {
   // (8, 14 or 15; -1 = not wired) and its level when the chain is open.
   int estop_statusword_bit = -1;
   bool estop_active_high = true;
+  // The e-stop chain / STO input read through CiA 402 0x60FD "digital
+  // inputs", mapped into tpdo or tpdo2 of every drive (-1 = not used): the
+  // bit (0..31) wired to the chain and the level that means "open".
+  int estop_input_bit = -1;
+  bool estop_input_open_high = false;  // default: the chain holds the input high while closed
   // CiA 402 0x6041 bit 4 "voltage enabled" dropping while Operation enabled
   // means the power stage lost its supply (STO / contactor of the e-stop chain).
   bool estop_on_voltage_loss = true;

@@ -21,6 +21,7 @@ struct DriveSetFeedback {
   Vec2 position_m = Vec2::Zero();    // workspace frame
   Vec2 velocity_mps = Vec2::Zero();  // workspace frame (0x606C if mapped, else from positions per SYNC)
   std::array<uint16_t, 2> statusword{};
+  std::array<uint32_t, 2> digital_inputs{};  // 0x60FD (0 if not mapped)
   std::array<cia402::State, 2> state{cia402::State::NotReadyToSwitchOn, cia402::State::NotReadyToSwitchOn};
   bool enabled = false;  // every axis in Operation enabled
   bool faulted = false;  // a master is Faulted/Failed: the command is ignored, drives disabled

@@ -68,6 +68,7 @@ struct NodeStatus {
   uint16_t statusword = 0;
   int32_t position_counts = 0;
   int32_t velocity_units = 0;
+  uint32_t digital_inputs = 0;   // 0x60FD, if mapped
   bool has_feedback = false;
   int64_t feedback_time_us = 0;
   uint32_t tpdo_received = 0;

@@ -56,6 +56,7 @@ struct SimFaults {
   uint8_t answer_as_node = 0;       // answer SDOs with this node id (0 = own id)
   uint16_t statusword_extra = 0;    // bits ORed into 0x6041 (e.g. a manufacturer-specific STO bit)
   bool fault_persists = false;      // the fault's cause stays (e.g. over-temperature): a reset edge does not clear it
+  uint32_t digital_inputs = 0x00010000;  // 0x60FD as wired: bit 16 = e-stop chain closed (clear it to open the chain)
 };
 
 class SimulatedDrive {

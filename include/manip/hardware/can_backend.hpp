@@ -137,6 +137,8 @@ class CanBackend final : public Backend, public BackendLogTap {
     canopen::Error error{};
     int axis{-1};
     std::uint16_t statusword{0};
+    bool by_input{false};     // e-stop from 0x60FD (else statusword / voltage)
+    std::uint32_t inputs{0};  // 0x60FD
   };
   static constexpr std::size_t kNotes = 32;
   std::string describe(const Note& n) const;
@@ -171,6 +173,8 @@ class CanBackend final : public Backend, public BackendLogTap {
   canopen::Error latched_error_{};
   int estop_axis_{-1};
   std::uint16_t estop_statusword_{0};
+  bool estop_by_input_{false};
+  std::uint32_t estop_inputs_{0};
   std::string budget_text_;
   // operator fault reset and fault notes
   std::int64_t loop_cycle_{-1};  // cycle of the current read() (-1 outside the loop)
