@@ -78,6 +78,10 @@ std::string RunReport::summary() const {
   if (log.discarded) os << ", " << log.discarded << " records discarded after the write failure";
   if (log.fault_history_states) os << ", " << log.fault_history_states << " states in fault histories";
   if (log.faults_not_printed) os << ", " << log.faults_not_printed << " fault lines not printed (rate limit)";
+  if (log.backend_notes) os << ", " << log.backend_notes << " backend fault texts";
+  if (log.raw_batches)
+    os << "\n  raw CAN frames: " << log.raw_frames << " logged on MANIP_CAN_RAW in " << log.raw_batches << " batches, "
+       << log.raw_frames_dropped << " dropped (queue full)";
   os << "\n  faults latched at exit: " << control::fault_names(fault_flags) << "\n";
   return os.str();
 }
