@@ -920,3 +920,62 @@ TEST_CASE("can backend: the whole loop (RtCycle, controller, CAN) stays allocati
   CHECK(frames > 4 * 8 * 256);  // ~4 frames per loop cycle on two buses
   CHECK(b.raw_frames_dropped() == 0);
 }
+
+TEST_CASE("docs/hardware.md: the Python example reads the raw CAN frames next to the session's states",
+          "[can_backend][log][python]") {
+  // The example is taken from the document itself, so the two cannot drift apart.
+  std::ifstream doc(kSrc + "/docs/hardware.md");
+  std::stringstream ds;
+  ds << doc.rdbuf();
+  const std::string text = ds.str();
+  const auto anchor = text.find("Reading it next to the session's state in Python");
+  REQUIRE(anchor != std::string::npos);
+  const auto begin = text.find("```python\n", anchor);
+  REQUIRE(begin != std::string::npos);
+  const auto end = text.find("```", begin + 10);
+  std::string code = text.substr(begin + 10, end - begin - 10);
+
+  const auto base = rt_cfg();
+  const auto cfg = manip::runtime::load_rt_config(kSrc + "/config/rt.yaml", manip::runtime::trials_overrides(base, 2));
+  auto can = can_cfg();
+  can.backend.record_raw_frames = true;
+  hw::CanBackend b(cfg, cfg.sim, can);
+  const std::string dir = std::filesystem::temp_directory_path() / ("manip_rawpy_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  auto opt = offline_run_options(dir + "/session.lcm");
+  opt.duration_s = 0.25;
+  std::ostringstream out;
+  const auto rep = manip::runtime::run_session(cfg, b, opt, out);
+  REQUIRE(rep.exit_code == 0);
+  REQUIRE(rep.log.raw_frames > 0);
+
+  auto replace = [&](const std::string& from, const std::string& to) {
+    const auto at = code.find(from);
+    REQUIRE(at != std::string::npos);
+    code.replace(at, from.size(), to);
+  };
+  replace("\"build/python\"", "\"" + std::string(MANIP_BINARY_DIR) + "/python\"");
+  replace("\"session.lcm\"", "\"" + dir + "/session.lcm\"");
+  {
+    std::ofstream py(dir + "/example.py");
+    py << code;
+  }
+  const std::string python = MANIP_PYTHON;
+  REQUIRE(std::filesystem::exists(python));
+  std::string printed;
+  const int rc = manip::testutil::run_command(python + " " + dir + "/example.py", &printed);
+  std::filesystem::remove_all(dir);
+  INFO(printed.substr(0, 2000));
+  REQUIRE(rc == 0);
+  std::istringstream lines(printed);
+  std::string line;
+  std::int64_t n = 0, sync_tx = 0, with_state = 0;
+  while (std::getline(lines, line)) {
+    ++n;
+    sync_tx += line.find(" TX 080#  x = (") != std::string::npos;  // in the loop (a state of the cycle)
+    with_state += line.find("x = (") != std::string::npos;
+  }
+  CHECK(n == rep.log.raw_frames);           // one candump-like line per logged frame
+  CHECK(std::abs(sync_tx - rep.cycles) <= 4);  // the SYNC of every drive tick (every 2nd cycle) on both buses
+  CHECK(with_state > n / 2);                // the loop's frames sit next to their state
+}
