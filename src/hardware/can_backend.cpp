@@ -215,6 +215,18 @@ void CanBackend::on_shutdown() noexcept {
       n.error = e;
       note(n);  // the logger is still running during shutdown (runtime::run_session)
     }
+    // Copley's event status register, read by SDO after the session when it
+    // ended with a fault (event_status_register: true): into the log too.
+    for (std::size_t b = 0; b < set_->bus_count(); ++b)
+      for (std::size_t s = 0; s < set_->master(b).node_count(); ++s) {
+        const cc::NodeStatus& ns = set_->master(b).node(s);
+        if (!ns.identity.event_status_read) continue;
+        Note n;
+        n.kind = Latch::kEventStatus;
+        n.error.node = ns.node_id;
+        n.error.value = ns.identity.event_status;
+        note(n);
+      }
   }
   if (sensor_) sensor_->stop();
   if (latch_ != Latch::kNone) std::cerr << "can backend: fault: " << fault_reason() << "\n";
@@ -249,6 +261,13 @@ std::string CanBackend::describe(const Note& n) const {
                     "e-stop chain open / safe torque off reported by the drive of workspace axis %d (statusword 0x%04X)",
                     n.axis, n.statusword);
       return buf;
+    }
+    case Latch::kEventStatus: {
+      char buf[80];
+      std::snprintf(buf, sizeof buf, "node %u: event status register 0x1002 after the fault = 0x%08X: ", n.error.node,
+                    n.error.value);
+      const std::string names = cc::copley_event_status_text(n.error.value);
+      return buf + (names.empty() ? std::string("no bit set") : names);
     }
     case Latch::kSensorStale:
       return "force sensor stale: no usable sample for " + std::to_string(can_.backend.force_stale_cycles) +

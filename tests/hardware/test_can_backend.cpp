@@ -674,7 +674,8 @@ TEST_CASE("can backend in run_session: the CANopen reason and the raw CAN traffi
   auto can = can_cfg();
   can.backend.record_raw_frames = true;
   hw::CanBackend can_b(cfg, cfg.sim, can);
-  Injecting b(can_b, 8000, [](hw::CanBackend& x) { x.sim_drive(1)->enter_fault(0x2310, 0); });
+  // over-current with Copley's event status bit 0 (short circuit detected)
+  Injecting b(can_b, 8000, [](hw::CanBackend& x) { x.sim_drive(1)->enter_fault(0x2310, 0x1); });
   const std::string path = (std::filesystem::temp_directory_path() /
                             ("manip_can_log_" + std::to_string(::getpid()) + ".lcm")).string();
   auto opt = offline_run_options(path);
@@ -740,6 +741,12 @@ TEST_CASE("can backend in run_session: the CANopen reason and the raw CAN traffi
   CHECK(faults.front().reason.find("; can backend: node 1: ") != std::string::npos);
   CHECK(faults.front().reason.find("Fault (statusword 0x") != std::string::npos);
   CHECK(rep.log.backend_notes >= 1);
+  // After the session, Copley's event status register (0x1002) of each drive, read at shutdown
+  bool event_status = false;
+  for (const auto& f : faults)
+    event_status |= f.cycle == -1 && f.reason.find("can backend: node 1: event status register 0x1002") == 0 &&
+                    f.reason.find("short circuit detected") != std::string::npos;
+  CHECK(event_status);
 
   // Raw traffic: every frame, candump-like, aligned with the states' cycles.
   INFO("raw frames " << frames << " in " << batches << " batches; start-up " << startup_frames << "; SYNC " << syncs[0]

@@ -128,7 +128,7 @@ class CanBackend final : public Backend, public BackendLogTap {
   void step_virtual_plant();
   [[noreturn]] void fail(const std::string& what, const canopen::Error& e);
 
-  enum class Latch : std::uint8_t { kNone, kCanopen, kEStop, kSensorStale };
+  enum class Latch : std::uint8_t { kNone, kCanopen, kEStop, kSensorStale, kEventStatus };
   // A fault as the loop records it (plain value); formatted by describe().
   struct Note {
     std::int64_t cycle{-1};
@@ -138,6 +138,7 @@ class CanBackend final : public Backend, public BackendLogTap {
     int axis{-1};
     std::uint16_t statusword{0};
     bool by_input{false};     // e-stop from 0x60FD (else statusword / voltage)
+    // kEventStatus: error.node and error.value = Copley's 0x1002 read at shutdown
     std::uint32_t inputs{0};  // 0x60FD
   };
   static constexpr std::size_t kNotes = 32;
