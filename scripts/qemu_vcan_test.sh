@@ -7,6 +7,11 @@
 # start-up, enable, 10 s of 2 kHz cyclic exchange (SYNC from the 4 kHz loop),
 # frame counts vs the configured rates from a sniffer socket, zero unexpected
 # frames, SYNC period statistics, disable; then prints the figures.
+# Then, across processes, the commissioning tool against the same drive
+# processes: manip_can_check on the good set-up must exit 0; on a set-up with
+# a missing node (configured on vcan2, where no drive runs) it must exit 8
+# with "never booted", and with a wrong node id (3 configured, 2 answering on
+# vcan1) exit 8 with "unexpected node id".
 #
 # Timing inside TCG is not meaningful for latency: the test checks the
 # protocol (every SYNC on the wire answered by RPDO1, TPDO1 and TPDO2 within
@@ -34,8 +39,8 @@ command -v qemu-system-x86_64 >/dev/null || skip "qemu-system-x86_64 not install
 bb=$(command -v busybox || true)
 [ -n "$bb" ] || skip "busybox not installed (busybox-static)"
 if ldd "$bb" >/dev/null 2>&1; then skip "$bb is not static (install busybox-static)"; fi
-for app in apps/manip_fake_drive tests/canopen/qemu/manip_vcan_session; do
-  [ -x "$build/$app" ] || { echo "qemu vcan test: FAIL: $build/$app not built (ninja manip_fake_drive manip_vcan_session)"; exit 1; }
+for app in apps/manip_fake_drive apps/manip_can_check apps/manip_rt tests/canopen/qemu/manip_vcan_session; do
+  [ -x "$build/$app" ] || { echo "qemu vcan test: FAIL: $build/$app not built (ninja manip_fake_drive manip_can_check manip_rt manip_vcan_session)"; exit 1; }
 done
 mkdir -p "$cache"
 
@@ -74,7 +79,7 @@ mkdir -p "$root/bin" "$root/lib/modules" "$root/etc" "$root/proc" "$root/sys" "$
 cp "$bb" "$root/bin/busybox"
 cp "$cache/mkvcan" "$root/bin/"
 for m in can can-raw can-dev vcan; do cp "$cache/$m.ko" "$root/lib/modules/"; done
-for app in "$build/apps/manip_fake_drive" "$build/tests/canopen/qemu/manip_vcan_session"; do
+for app in "$build/apps/manip_fake_drive" "$build/apps/manip_can_check" "$build/apps/manip_rt" "$build/tests/canopen/qemu/manip_vcan_session"; do
   cp "$app" "$root/bin/"
   for lib in $(ldd "$app" | awk '/=>/ {print $3} /ld-linux/ {print $1}'); do
     mkdir -p "$root$(dirname "$lib")"
@@ -82,12 +87,29 @@ for app in "$build/apps/manip_fake_drive" "$build/tests/canopen/qemu/manip_vcan_
   done
 done
 cp "$here/tests/canopen/qemu/guest_bus_2k.yml" "$root/etc/bus.yml"
+# Broken set-ups for manip_can_check: stage_y's drive missing (configured on
+# vcan2, nobody there; boot deadline 0.5 s), or configured with a wrong node id.
+sed -e 's/bus_y: {interface: vcan1/bus_y: {interface: vcan2/' -e 's/boot_timeout_ms: 5000/boot_timeout_ms: 500/' \
+  "$here/tests/canopen/qemu/guest_bus_2k.yml" > "$root/etc/missing.yml"
+sed -e 's/node_id: 2, workspace_axis: 1/node_id: 3, workspace_axis: 1/' \
+  "$here/tests/canopen/qemu/guest_bus_2k.yml" > "$root/etc/wrongid.yml"
+# manip_rt --backend can against the drive processes: the guest's bus file
+# with no force sensor and the raw traffic recorded; rt.yaml with the
+# sample-staleness and overrun limits widened (the emulated guest stalls for
+# tens of ms; both policies are unit-tested), everything else as shipped.
+{ cat "$here/tests/canopen/qemu/guest_bus_2k.yml"; printf 'backend:\n  force_sensor: none\n  record_raw_frames: true\n'; } > "$root/etc/rt_can.yml"
+sed -e 's/^\(  stale_cycles:\) *[0-9]*/\1 4000/' -e 's/^\(  overrun_fault_consecutive:\) *[0-9]*/\1 1000000/' \
+    -e 's/^\(  overrun_fault_per_second:\) *[0-9]*/\1 10000/' "$here/config/rt.yaml" > "$root/etc/rt.yaml"
+grep -q "stale_cycles: 4000" "$root/etc/rt.yaml" && grep -q "overrun_fault_consecutive: 1000000" "$root/etc/rt.yaml" ||
+  { echo "qemu vcan test: FAIL: could not derive the guest rt.yaml from config/rt.yaml"; exit 1; }
+grep -q vcan2 "$root/etc/missing.yml" && grep -q "node_id: 3" "$root/etc/wrongid.yml" ||
+  { echo "qemu vcan test: FAIL: could not derive the broken set-ups from guest_bus_2k.yml"; exit 1; }
 cat > "$root/init" <<INIT
 #!/bin/busybox sh
 /bin/busybox --install -s /bin
 mount -t proc proc /proc; mount -t sysfs sys /sys; mount -t devtmpfs dev /dev
 for m in can can-raw can-dev vcan; do insmod /lib/modules/\$m.ko || echo "GUEST insmod \$m failed"; done
-mkvcan vcan0 && mkvcan vcan1 || echo "GUEST mkvcan failed"
+mkvcan vcan0 && mkvcan vcan1 && mkvcan vcan2 || echo "GUEST mkvcan failed"
 # SYNC-loss alarm off in the drives: the emulated guest stalls for tens of
 # ms at times (host steal time); that alarm is unit-tested on the virtual bus.
 manip_fake_drive --iface vcan0 --node 1 --sync-loss-limit 0 > /tmp/d1.log 2>&1 &
@@ -95,6 +117,17 @@ manip_fake_drive --iface vcan1 --node 2 --sync-loss-limit 0 > /tmp/d2.log 2>&1 &
 sleep 1
 manip_vcan_session --config /etc/bus.yml --duration $duration --min-rate-fraction ${MANIP_VCAN_MIN_RATE:-0.15} --sync-median-max 1.5
 echo "GUEST_EXIT=\$?"
+# Across processes: the commissioning check against the drive processes.
+manip_can_check --config /etc/bus.yml --periods 400 > /tmp/cc.log 2>&1; echo "CANCHECK good rc=\$?"
+sed 's/^/CANCHECK good: /' /tmp/cc.log | grep -E "node [0-9]+:|OK|FAIL" | tail -4
+manip_can_check --config /etc/missing.yml --periods 400 > /tmp/cc.log 2>&1; echo "CANCHECK missing rc=\$?"
+sed 's/^/CANCHECK missing: /' /tmp/cc.log | grep -E "FAIL|never" | tail -2
+manip_can_check --config /etc/wrongid.yml --periods 400 > /tmp/cc.log 2>&1; echo "CANCHECK wrongid rc=\$?"
+sed 's/^/CANCHECK wrongid: /' /tmp/cc.log | grep -E "FAIL|unexpected" | tail -2
+# manip_rt --backend can, paced (SCHED_FIFO in the guest), 2 s of loop time.
+manip_rt --backend can --can-config /etc/rt_can.yml --config /etc/rt.yaml --realtime --duration 2 \
+  --log /tmp/rt.lcm --lcm-url none > /tmp/rt.log 2>&1; echo "MANIP_RT rc=\$?"
+sed 's/^/MANIP_RT: /' /tmp/rt.log | grep -vE "^MANIP_RT:   +(frame|SYNC|RPDO|TPDO|heartbeat|EMCY|cyclic|total)|^MANIP_RT: bus " | tail -14
 tail -2 /tmp/d1.log /tmp/d2.log
 poweroff -f
 INIT
@@ -109,8 +142,22 @@ timeout 300 qemu-system-x86_64 ${MANIP_QEMU_ACCEL:--accel tcg,thread=multi} -m 5
   -kernel "$cache/vmlinuz" -initrd "$work/initrd.gz" \
   -append "console=ttyS0 quiet panic=-1 no_timer_check" > "$out" 2>&1 || true
 t1=$(date +%s)
-tr -d '\r' < "$out" | grep -E "^(bus |  |start-up|cyclic|FAULT|disable|shutdown|VCAN_RESULT|GUEST|node [12]:|==>)" || true
+tr -d '\r' < "$out" | grep -E "^(bus |  |start-up|cyclic|FAULT|disable|shutdown|VCAN_RESULT|GUEST|CANCHECK|MANIP_RT|node [12]:|==>)" || true
 echo "qemu run: $((t1 - t0)) s wall"
-if tr -d '\r' < "$out" | grep -q "^VCAN_RESULT PASS"; then echo "qemu vcan test: PASS"; exit 0; fi
-echo "qemu vcan test: FAIL"; tr -d '\r' < "$out" | tail -40
+con=$(tr -d '\r' < "$out")
+fail=""
+echo "$con" | grep -q "^VCAN_RESULT PASS" || fail="$fail protocol"
+# manip_can_check across processes: 0 on the good set-up, 8 with the reason on the broken ones
+echo "$con" | grep -q "^CANCHECK good rc=0$" || fail="$fail can_check-good"
+echo "$con" | grep -q "^CANCHECK good: OK: the bus is ready" || fail="$fail can_check-good-report"
+echo "$con" | grep -q "^CANCHECK missing rc=8$" || fail="$fail can_check-missing"
+echo "$con" | grep -q "^CANCHECK missing: .*node 2: node never booted" || fail="$fail can_check-missing-reason"
+echo "$con" | grep -q "^CANCHECK wrongid rc=8$" || fail="$fail can_check-wrongid"
+echo "$con" | grep -q "^CANCHECK wrongid: .*unexpected node id" || fail="$fail can_check-wrongid-reason"
+# manip_rt --backend can across processes: the duration reached without a fault, the traffic logged
+echo "$con" | grep -q "^MANIP_RT rc=0$" || fail="$fail manip_rt"
+echo "$con" | grep -q "^MANIP_RT: manip_rt: duration reached" || fail="$fail manip_rt-duration"
+echo "$con" | grep -Eq "^MANIP_RT:   raw CAN frames: [1-9][0-9]* logged on MANIP_CAN_RAW in [0-9]+ batches, 0 dropped" || fail="$fail manip_rt-raw"
+if [ -z "$fail" ]; then echo "qemu vcan test: PASS"; exit 0; fi
+echo "qemu vcan test: FAIL:$fail"; echo "$con" | tail -40
 exit 1

@@ -23,6 +23,7 @@ ObjectRef object_ref(PdoObject o) {
     case PdoObject::Statusword: return {0x6041, 0, 16};
     case PdoObject::PositionActual: return {0x6064, 0, 32};
     case PdoObject::VelocityActual: return {0x606C, 0, 32};
+    case PdoObject::DigitalInputs: return {0x60FD, 0, 32};
   }
   return {0, 0, 0};
 }
@@ -34,6 +35,7 @@ const char* to_string(PdoObject o) {
     case PdoObject::Statusword: return "statusword";
     case PdoObject::PositionActual: return "position_actual";
     case PdoObject::VelocityActual: return "velocity_actual";
+    case PdoObject::DigitalInputs: return "digital_inputs";
   }
   return "?";
 }
@@ -157,9 +159,10 @@ struct Reader {
       else if (!rx && s == "statusword") o = PdoObject::Statusword;
       else if (!rx && s == "position_actual") o = PdoObject::PositionActual;
       else if (!rx && s == "velocity_actual") o = PdoObject::VelocityActual;
+      else if (!rx && s == "digital_inputs") o = PdoObject::DigitalInputs;
       else {
         fail(e, key, "unknown " + std::string(rx ? "RPDO" : "TPDO") + " object '" + s + "' (allowed: " +
-                         (rx ? "controlword, target_torque" : "statusword, position_actual, velocity_actual") + ")");
+                         (rx ? "controlword, target_torque" : "statusword, position_actual, velocity_actual, digital_inputs") + ")");
         return;
       }
       if (m.contains(o)) {
@@ -188,6 +191,7 @@ void read_master(Reader& r, const YAML::Node& n, MasterConfig& m) {
     else if (k == "boot_timeout_ms") r.integer(v, key, m.boot_timeout_ms, 1, 600000);
     else if (k == "sdo_timeout_ms") r.integer(v, key, m.sdo_timeout_ms, 1, 60000);
     else if (k == "enable_timeout_ms") r.integer(v, key, m.enable_timeout_ms, 1, 60000);
+    else if (k == "fault_reset_timeout_ms") r.integer(v, key, m.fault_reset_timeout_ms, 1, 60000);
     else if (k == "max_bus_load") r.real(v, key, m.max_bus_load, 0.01, 1.0);
     else if (k == "tpdo_miss_limit") r.integer(v, key, m.tpdo_miss_limit, 1, 1000);
     else if (k == "emcy_headroom_hz") r.real(v, key, m.emcy_headroom_hz, 0.0, 10000.0);
@@ -245,6 +249,8 @@ void read_backend(Reader& r, const YAML::Node& n, BackendOptions& b) {
       if (bit >= 0 && bit != 8 && bit != 14 && bit != 15)
         r.fail(v, key, "must be -1 (not wired) or a manufacturer-specific statusword bit (8, 14, 15)");
     } else if (k == "estop_active_high") r.boolean(v, key, b.estop_active_high);
+    else if (k == "estop_input_bit") r.integer(v, key, b.estop_input_bit, -1, 31);
+    else if (k == "estop_input_open_high") r.boolean(v, key, b.estop_input_open_high);
     else if (k == "estop_on_voltage_loss") r.boolean(v, key, b.estop_on_voltage_loss);
     else if (k == "force_sensor") {
       r.text(v, key, b.force_sensor);
@@ -260,6 +266,8 @@ void read_backend(Reader& r, const YAML::Node& n, BackendOptions& b) {
     else if (k == "netft_counts_per_force") r.real(v, key, b.netft_counts_per_force, 1e-6, 1e12);
     else if (k == "jr3_device") r.text(v, key, b.jr3_device);
     else if (k == "jr3_filter") r.integer(v, key, b.jr3_filter, 0, 6);
+    else if (k == "record_raw_frames") r.boolean(v, key, b.record_raw_frames);
+    else if (k == "raw_queue_frames") r.integer(v, key, b.raw_queue_frames, 1024, 4u << 20);
     else r.fail(kv.first, key, "unknown key");
   }
 }
@@ -348,6 +356,10 @@ bool parse_config_checked(const std::string& text, const std::string& source, Ca
         r.fail(at, prefix + ".tpdo", "must map statusword and position_actual");
       for (int i = 0; i < d.tpdo2.count; ++i)
         if (d.tpdo.contains(d.tpdo2.objects[i])) r.fail(at, prefix + ".tpdo2", "object already in tpdo");
+      if (cfg.backend.estop_input_bit >= 0 && !d.tpdo.contains(PdoObject::DigitalInputs) &&
+          !d.tpdo2.contains(PdoObject::DigitalInputs))
+        r.fail(at, prefix + ".tpdo2",
+               "backend.estop_input_bit needs digital_inputs (0x60FD) mapped in tpdo or tpdo2 of every drive");
       if (d.heartbeat_timeout_ms <= d.heartbeat_producer_ms)
         r.fail(at, prefix + ".heartbeat_timeout_ms", "must exceed heartbeat_producer_ms");
       if (d.master_heartbeat_timeout_ms <= cfg.master.heartbeat_ms)

@@ -22,8 +22,10 @@ CanDriveSet::CanDriveSet(const CanConfig& cfg, std::vector<CanPort*> ports) : cf
 
 void CanDriveSet::flush(std::size_t b, FrameBuffer& tx) {
   if (b < ports_.size() && ports_[b])
-    for (const CanFrame& f : tx)
+    for (const CanFrame& f : tx) {
       if (!ports_[b]->send(f)) tx_failed_[b] = 1;
+      else if (recorder_) recorder_->record(now_us_, static_cast<uint8_t>(b), true, f);
+    }
   tx.clear();
 }
 
@@ -65,6 +67,8 @@ const DriveSetFeedback& CanDriveSet::read(int64_t now) {
     std::size_t n = 0;
     do {
       n = ports_[b]->receive(std::span<CanFrame>(rx_.data(), rx_.size()));
+      if (recorder_)
+        for (std::size_t i = 0; i < n; ++i) recorder_->record(now, static_cast<uint8_t>(b), false, rx_[i]);
       masters_[b]->handle(now, std::span<const CanFrame>(rx_.data(), n), tx_[b]);
     } while (n == rx_.size());
     if (tx_failed_[b]) {  // frames of the last cycle were refused: commands did not reach the drive
@@ -94,6 +98,7 @@ const DriveSetFeedback& CanDriveSet::read(int64_t now) {
       a.have_prev = ns.has_feedback;
     }
     fb_.statusword[std::size_t(i)] = ns.statusword;
+    fb_.digital_inputs[std::size_t(i)] = ns.digital_inputs;
     fb_.state[std::size_t(i)] = cia402::decode(ns.statusword);
     fb_.enabled &= fb_.state[std::size_t(i)] == cia402::State::OperationEnabled;
   }
@@ -186,9 +191,29 @@ Error CanDriveSet::shutdown(const Ticker& tick) {
 
 bool CanDriveSet::request_fault_reset() {
   bool ok = true;
-  for (auto& m : masters_)
+  for (auto& m : masters_) {
     if (m->phase() == Phase::Faulted) ok &= m->request_fault_reset();
+    else if (m->phase() == Phase::Failed) ok = false;  // start-up failure: only configure() again
+  }
   return ok;
+}
+
+bool CanDriveSet::fault_acknowledgeable() const {
+  bool any = false;
+  for (const auto& m : masters_) {
+    if (m->phase() == Phase::Failed) return false;
+    if (m->phase() == Phase::Faulted) {
+      if (!m->fault_acknowledgeable()) return false;
+      any = true;
+    }
+  }
+  return any;
+}
+
+uint32_t CanDriveSet::fault_resets_failed() const {
+  uint32_t n = 0;
+  for (const auto& m : masters_) n += m->fault_resets_failed();
+  return n;
 }
 
 }  // namespace manip::canopen

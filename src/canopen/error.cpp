@@ -43,6 +43,7 @@ const char* to_string(ErrorCode c) {
     case ErrorCode::EnableTimeout: return "drive did not reach Operation enabled in time";
     case ErrorCode::OperatorStop: return "stopped by the operator";
     case ErrorCode::CycleOverrun: return "control cycle late: SYNC periods skipped";
+    case ErrorCode::FaultResetFailed: return "fault reset did not clear the drive fault (cause still present?)";
   }
   return "?";
 }
@@ -150,6 +151,7 @@ std::string describe(const Error& e) {
       add(" code 0x%04X (%s), error register 0x%02X", e.value, emcy_code_text(static_cast<uint16_t>(e.value)), e.detail);
       break;
     case ErrorCode::DriveFault:
+    case ErrorCode::FaultResetFailed:
       add(" (statusword 0x%04X)", e.value);
       break;
     case ErrorCode::BusLoadTooHigh:

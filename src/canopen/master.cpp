@@ -82,6 +82,7 @@ Master::Master(const CanConfig& cfg, const std::string& bus_name) : mc_(cfg.mast
     if (d.bus == bus_name) drives_.push_back(d);
   nodes_.resize(drives_.size());
   sdo_.resize(drives_.size());
+  reset_edge_sent_.assign(drives_.size(), 0);
   for (std::size_t i = 0; i < drives_.size(); ++i) {
     nodes_[i].node_id = drives_[i].node_id;
     sdo_[i].set_node(drives_[i].node_id);
@@ -266,6 +267,8 @@ bool Master::request_fault_reset() {
   // power, the boot-up comes later and its configuration is gone.
   if (phase_ != Phase::Faulted || needs_restart_) return false;
   fault_reset_requested_ = true;
+  fault_reset_deadline_us_ = now_us_ + int64_t(mc_.fault_reset_timeout_ms) * 1000;
+  std::fill(reset_edge_sent_.begin(), reset_edge_sent_.end(), uint8_t{0});
   return true;
 }
 
@@ -375,6 +378,7 @@ void Master::on_tpdo(int slot, int pdo, const CanFrame& f, FrameBuffer& tx) {
       case PdoObject::Statusword: n.statusword = get_u16(f.data + b); b += 2; break;
       case PdoObject::PositionActual: n.position_counts = static_cast<int32_t>(get_u32(f.data + b)); b += 4; break;
       case PdoObject::VelocityActual: n.velocity_units = static_cast<int32_t>(get_u32(f.data + b)); b += 4; break;
+      case PdoObject::DigitalInputs: n.digital_inputs = get_u32(f.data + b); b += 4; break;
       default: b += object_ref(m.objects[k]).bits / 8; break;
     }
   }
@@ -601,13 +605,30 @@ void Master::update(int64_t now, FrameBuffer& tx) {
       }
       if (phase_ == Phase::Faulted) {
         bool any_fault = false;
-        for (auto& n : nodes_) {
+        for (std::size_t i = 0; i < nodes_.size(); ++i) {
+          NodeStatus& n = nodes_[i];
           const auto st = cia402::decode(n.statusword);
           const bool in_fault = st == cia402::State::Fault || st == cia402::State::FaultReactionActive;
           any_fault |= in_fault;
-          const auto step = cia402::master_step(n.statusword, cia402::Target::Disabled, fault_reset_requested_, n.controlword);
+          // One rising edge of 0x6040 bit 7 per operator request (CiA 402
+          // transition 15): a drive whose cause persists is not reset again
+          // and again behind the operator's back.
+          const bool want_edge = fault_reset_requested_ && !reset_edge_sent_[i];
+          const auto step = cia402::master_step(n.statusword, cia402::Target::Disabled, want_edge, n.controlword);
+          if (step.transition == 15) reset_edge_sent_[i] = 1;
           n.controlword = step.controlword;
           n.torque_permille = 0;
+        }
+        if (fault_reset_requested_ && any_fault && now >= fault_reset_deadline_us_) {
+          fault_reset_requested_ = false;
+          ++fault_resets_failed_;
+          for (const auto& n : nodes_) {
+            const auto st = cia402::decode(n.statusword);
+            if (st == cia402::State::Fault || st == cia402::State::FaultReactionActive) {
+              log(Error{ErrorCode::FaultResetFailed, n.node_id, 0, 0, n.statusword, 0, now});
+              break;
+            }
+          }
         }
         if (fault_reset_requested_ && !any_fault) {
           // Acknowledged and every drive out of Fault: back to cyclic, disabled.

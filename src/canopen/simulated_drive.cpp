@@ -10,7 +10,9 @@ namespace manip::canopen {
 namespace {
 constexpr uint32_t kInvalid = 0x80000000u;  // COB-ID bit 31: PDO not valid (CiA 301 §7.5.2.35)
 bool is_mapping(uint16_t i) { return (i >= 0x1600 && i <= 0x1603) || (i >= 0x1A00 && i <= 0x1A03); }
-bool is_live(uint16_t i) { return i == 0x6041 || i == 0x6064 || i == 0x606C || i == 0x6061 || i == 0x6077; }
+bool is_live(uint16_t i) {
+  return i == 0x6041 || i == 0x6064 || i == 0x606C || i == 0x6061 || i == 0x6077 || i == 0x60FD;
+}
 }  // namespace
 
 SimulatedDrive::SimulatedDrive(const SimDriveParams& p) : p_(p) {
@@ -64,6 +66,7 @@ void SimulatedDrive::build_od() {
   add(0x6061, 0, 1, false, true, 0);
   add(0x6064, 0, 4, false, true, 0);
   add(0x606C, 0, 4, false, true, 0);
+  add(0x60FD, 0, 4, false, true, 0);  // digital inputs (CiA 402), SimFaults::digital_inputs
   add(0x6071, 0, 2, true, true, 0);
   add(0x6075, 0, 4, false, false, static_cast<uint32_t>(std::lround(p_.rated_current_a * 1000)));
   add(0x6077, 0, 2, false, true, 0);
@@ -112,6 +115,7 @@ uint32_t SimulatedDrive::live_value(uint16_t index) const {
     case 0x6041: return statusword();
     case 0x6064: return static_cast<uint32_t>(position_counts());
     case 0x606C: return static_cast<uint32_t>(velocity_units());
+    case 0x60FD: return faults_.digital_inputs;
     case 0x6061: { const Entry* e = find(0x6060, 0); return e ? e->value : 0; }
     case 0x6077: {
       const bool on = state_ == cia402::State::OperationEnabled;
@@ -171,7 +175,7 @@ uint32_t SimulatedDrive::write_object(uint16_t index, uint8_t sub, uint32_t v, s
       uint8_t size = 0;
       if (const Entry* o = find(oi, os)) { mappable = o->mappable; size = o->bytes; }
       const bool rx = index < 0x1A00;
-      if (rx && (oi == 0x6041 || oi == 0x6064 || oi == 0x606C)) mappable = false;
+      if (rx && (oi == 0x6041 || oi == 0x6064 || oi == 0x606C || oi == 0x60FD)) mappable = false;
       if (!rx && (oi == 0x6040 || oi == 0x6071)) mappable = false;
       if (!mappable || ob != size * 8) return 0x06040041;
     }
@@ -236,13 +240,16 @@ void SimulatedDrive::apply_controlword(uint16_t cw) {
 
 void SimulatedDrive::step_state_machine() {
   const auto before = state_;
-  auto st = cia402::drive_step(state_, controlword_, prev_controlword_, fault_pending_);
+  // A persisting cause keeps the drive in Fault whatever the controlword.
+  const bool cause = faults_.fault_persists && (state_ == cia402::State::Fault || state_ == cia402::State::FaultReactionActive);
+  auto st = cia402::drive_step(state_, controlword_, prev_controlword_, fault_pending_ || cause);
   state_ = st.state;
   if (fault_pending_) {  // fault reaction is immediate in the simulation (13 then 14)
     state_ = cia402::drive_step(state_, controlword_, prev_controlword_, true).state;
     fault_pending_ = false;
   }
   if (before == cia402::State::Fault && state_ == cia402::State::SwitchOnDisabled) {
+    ++fault_resets_;
     if (Entry* e = find(0x1001, 0)) e->value = 0;
     if (Entry* e = find(0x1002, 0)) e->value = 0;
     reset_emcy_pending_ = true;  // EMCY 0x0000 "error reset"
@@ -420,7 +427,7 @@ void SimulatedDrive::on_sdo(const CanFrame& f, int64_t now, FrameBuffer& tx) {
     const uint32_t v = read_object(index, sub, ok, a);
     if (!ok) return abort(index, sub, a);
     const Entry* e = find(index, sub);
-    const int bytes = e ? e->bytes : (index == 0x6064 || index == 0x606C) ? 4 : (index == 0x6061 ? 1 : 2);
+    const int bytes = e ? e->bytes : (index == 0x6064 || index == 0x606C || index == 0x60FD) ? 4 : (index == 0x6061 ? 1 : 2);
     r.data[0] = static_cast<uint8_t>(0x43 | ((4 - bytes) << 2));
     put_u32(r.data + 4, v);
     tx.push(r);

@@ -60,6 +60,7 @@ CanBackend::CanBackend(const control::ControlConfig& law, const SimConfig& sim, 
       period_us_(std::llround(law.dt_s() * 1e6)),
       sensor_(std::move(sensor)),
       force_(boundary_params(can.backend)) {
+  if (can.backend.record_raw_frames) recorder_ = std::make_unique<cc::FrameRecorder>(can.backend.raw_queue_frames);
   if (std::abs(law.dt_s() * 1e6 - double(period_us_)) > 1e-6)
     throw ConfigError("can backend: the loop period " + std::to_string(law.dt_s() * 1e6) +
                       " us is not a whole number of microseconds (the CANopen clock counts microseconds)");
@@ -158,6 +159,10 @@ void CanBackend::on_configure() {
     now_us_ = clock_us();
   }
   set_ = std::make_unique<cc::CanDriveSet>(can_, ports);
+  if (recorder_) {
+    recorder_->set_cycle(-1);  // start-up traffic (NMT, SDO list) is recorded too
+    set_->set_recorder(recorder_.get());
+  }
   const cc::Error e = set_->configure([this] { return tick(); });
   if (e) fail("CANopen start-up failed (nothing enabled)", e);
 
@@ -185,9 +190,17 @@ void CanBackend::on_enable() {
   latch_ = Latch::kNone;
   latched_error_ = {};
   last_write_us_ = now_us_;
+  loop_cycle_ = -1;  // the first read() is loop cycle 0
+  fault_seen_ = false;
+  estop_open_ = false;
+  stale_ = false;
+  reset_ = Reset::kNone;
+  resets_failed_seen_ = set_->fault_resets_failed();
 }
 
 void CanBackend::on_disable() noexcept {
+  loop_cycle_ = -1;
+  if (recorder_) recorder_->set_cycle(-1);
   if (set_) (void)set_->disable([this] { return tick(); });
 }
 
@@ -197,7 +210,23 @@ void CanBackend::on_shutdown() noexcept {
     if (e && latch_ == Latch::kNone) {
       latch_ = Latch::kCanopen;
       latched_error_ = e;
+      Note n;
+      n.kind = Latch::kCanopen;
+      n.error = e;
+      note(n);  // the logger is still running during shutdown (runtime::run_session)
     }
+    // Copley's event status register, read by SDO after the session when it
+    // ended with a fault (event_status_register: true): into the log too.
+    for (std::size_t b = 0; b < set_->bus_count(); ++b)
+      for (std::size_t s = 0; s < set_->master(b).node_count(); ++s) {
+        const cc::NodeStatus& ns = set_->master(b).node(s);
+        if (!ns.identity.event_status_read) continue;
+        Note n;
+        n.kind = Latch::kEventStatus;
+        n.error.node = ns.node_id;
+        n.error.value = ns.identity.event_status;
+        note(n);
+      }
   }
   if (sensor_) sensor_->stop();
   if (latch_ != Latch::kNone) std::cerr << "can backend: fault: " << fault_reason() << "\n";
@@ -205,15 +234,40 @@ void CanBackend::on_shutdown() noexcept {
 }
 
 std::string CanBackend::fault_reason() const {
-  switch (latch_) {
+  Note n;
+  n.kind = latch_;
+  n.error = latched_error_;
+  n.axis = estop_axis_;
+  n.statusword = estop_statusword_;
+  n.by_input = estop_by_input_;
+  n.inputs = estop_inputs_;
+  return describe(n);
+}
+
+std::string CanBackend::describe(const Note& n) const {
+  switch (n.kind) {
     case Latch::kNone: return "";
-    case Latch::kCanopen: return cc::describe(latched_error_);
+    case Latch::kCanopen: return cc::describe(n.error);
     case Latch::kEStop: {
-      char buf[160];
+      char buf[200];
+      if (n.by_input) {
+        std::snprintf(buf, sizeof buf,
+                      "e-stop chain open: digital input bit %d (0x60FD = 0x%08X) of the drive of workspace axis %d "
+                      "reads the open level (statusword 0x%04X)",
+                      can_.backend.estop_input_bit, n.inputs, n.axis, n.statusword);
+        return buf;
+      }
       std::snprintf(buf, sizeof buf,
                     "e-stop chain open / safe torque off reported by the drive of workspace axis %d (statusword 0x%04X)",
-                    estop_axis_, estop_statusword_);
+                    n.axis, n.statusword);
       return buf;
+    }
+    case Latch::kEventStatus: {
+      char buf[80];
+      std::snprintf(buf, sizeof buf, "node %u: event status register 0x1002 after the fault = 0x%08X: ", n.error.node,
+                    n.error.value);
+      const std::string names = cc::copley_event_status_text(n.error.value);
+      return buf + (names.empty() ? std::string("no bit set") : names);
     }
     case Latch::kSensorStale:
       return "force sensor stale: no usable sample for " + std::to_string(can_.backend.force_stale_cycles) +
@@ -245,6 +299,8 @@ void CanBackend::step_virtual_plant() {
 
 void CanBackend::read(control::SensorReading& out) {
   ++cycles_;
+  ++loop_cycle_;
+  if (recorder_) recorder_->set_cycle(loop_cycle_);
   if (virtual_) step_virtual_plant();
   else now_us_ = clock_us();
   // Keep SYNC, RPDOs and the master heartbeat going (with zero force) if
@@ -286,37 +342,128 @@ void CanBackend::read(control::SensorReading& out) {
   std::uint32_t st = 0;
   if (fb.enabled) st |= bs::kDrivesEnabled;
   if (fb.faulted) {
-    const cc::Error e = set_->error();
-    st |= status_bit(e.code);
-    if (latch_ == Latch::kNone) {
-      latch_ = Latch::kCanopen;
-      latched_error_ = e;
+    cc::Error e = set_->error();
+    std::uint32_t bit = status_bit(e.code);
+    // Acknowledgeable faults raise their bit in the detecting cycle only (the
+    // supervisor latches it; the master holds the drives disabled until the
+    // operator's reset); faults that need a restart stay present.
+    bool raise = !set_->fault_acknowledgeable();
+    if (!fault_seen_) {
+      fault_seen_ = true;
+      raise = true;
+      reset_ = Reset::kNone;
+    } else if (reset_ == Reset::kClearing && set_->fault_resets_failed() != resets_failed_seen_) {
+      // The edge went out but a drive stayed in Fault (its cause persists):
+      // raise it again, with the master's reason.
+      resets_failed_seen_ = set_->fault_resets_failed();
+      reset_ = Reset::kNone;
+      e = cc::Error{cc::ErrorCode::FaultResetFailed, 0, 0, 0, 0, 0, now_us_};
+      for (std::size_t b = 0; b < set_->bus_count() && !e.node; ++b) {
+        const cc::Master& m = set_->master(b);
+        for (std::size_t i = m.log_count(); i-- > 0;)
+          if (m.log_entry(i).code == cc::ErrorCode::FaultResetFailed) {
+            e = m.log_entry(i);
+            break;
+          }
+      }
+      bit = bs::kDriveFault;
+      raise = true;
+    } else {
+      e = {};  // already noted
+    }
+    if (e) {
+      if (latch_ == Latch::kNone) {
+        latch_ = Latch::kCanopen;
+        latched_error_ = e;
+      }
+      Note n;
+      n.cycle = loop_cycle_;
+      n.status = bit;
+      n.kind = Latch::kCanopen;
+      n.error = e;
+      note(n);
+    }
+    if (raise) st |= bit;
+  } else {
+    fault_seen_ = false;
+    if (reset_ == Reset::kClearing) {  // every drive out of Fault: re-enable (CiA 402 2, 3, 4)
+      set_->request_enable();
+      reset_ = Reset::kEnabling;
+      reset_deadline_us_ = now_us_ + std::int64_t(can_.master.enable_timeout_ms) * 1000;
+    }
+    if (reset_ == Reset::kEnabling) {
+      if (fb.enabled) {
+        reset_ = Reset::kNone;
+      } else if (now_us_ > reset_deadline_us_) {
+        reset_ = Reset::kNone;
+        const cc::Error e{cc::ErrorCode::EnableTimeout, 0, 0, 0, 0, can_.master.enable_timeout_ms, now_us_};
+        if (latch_ == Latch::kNone) {
+          latch_ = Latch::kCanopen;
+          latched_error_ = e;
+        }
+        Note n;
+        n.cycle = loop_cycle_;
+        n.status = bs::kDriveFault;
+        n.kind = Latch::kCanopen;
+        n.error = e;
+        note(n);
+        st |= bs::kDriveFault;
+      }
     }
   }
   // Safety inputs, every cycle: the e-stop chain / STO as the drives report it.
   const auto& bo = can_.backend;
   for (int a = 0; a < 2; ++a) {
     const std::uint16_t sw = fb.statusword[std::size_t(a)];
-    bool open = false;
+    const std::uint32_t di = fb.digital_inputs[std::size_t(a)];
+    bool open = false, by_input = false;
     if (bo.estop_statusword_bit >= 0) open |= (((sw >> bo.estop_statusword_bit) & 1u) != 0) == bo.estop_active_high;
+    // The chain's own contact on a drive input, CiA 402 0x60FD in a TPDO
+    // (fresh every SYNC period).
+    if (bo.estop_input_bit >= 0 && (((di >> bo.estop_input_bit) & 1u) != 0) == bo.estop_input_open_high) {
+      open = true;
+      by_input = true;
+    }
     // CiA 402 0x6041 bit 4 (voltage enabled) gone while Operation enabled: the
     // power stage lost its supply (STO / e-stop contactor).
     if (bo.estop_on_voltage_loss && fb.state[std::size_t(a)] == cc::cia402::State::OperationEnabled &&
         !(sw & cc::cia402::sw::kVoltageEnabled))
       open = true;
     if (open) {
+      if (!(st & bs::kHwEStopOpen) && !estop_open_) {  // the chain opened in this cycle: note it
+        Note n;
+        n.cycle = loop_cycle_;
+        n.status = bs::kHwEStopOpen;
+        n.kind = Latch::kEStop;
+        n.axis = a;
+        n.statusword = sw;
+        n.by_input = by_input;
+        n.inputs = di;
+        note(n);
+      }
       st |= bs::kHwEStopOpen;
       if (latch_ == Latch::kNone) {
         latch_ = Latch::kEStop;
         estop_axis_ = a;
         estop_statusword_ = sw;
+        estop_by_input_ = by_input;
+        estop_inputs_ = di;
       }
     }
   }
+  estop_open_ = (st & bs::kHwEStopOpen) != 0;
   if (fo.stale) {
     st |= bs::kBackendError;
+    if (!stale_) {
+      Note n;
+      n.cycle = loop_cycle_;
+      n.status = bs::kBackendError;
+      n.kind = Latch::kSensorStale;
+      note(n);
+    }
     if (latch_ == Latch::kNone) latch_ = Latch::kSensorStale;
   }
+  stale_ = fo.stale;
   out.status = st;
   last_status_ = st;
 }
@@ -329,6 +476,72 @@ void CanBackend::write(const control::ActuatorCommand& cmd) {
 
 void CanBackend::display(const control::DisplayCue& cue) {
   if (plant_) plant_->display(cue);
+}
+
+void CanBackend::note(const Note& n) noexcept {
+  if (!notes_.try_push(n)) notes_dropped_.fetch_add(1, std::memory_order_relaxed);
+}
+
+void CanBackend::request_fault_reset() noexcept {
+  if (!set_ || state() != BackendState::kActive) return;
+  // The operator acknowledged: the next fault gets a fresh reason.
+  latch_ = Latch::kNone;
+  latched_error_ = {};
+  if (set_->faulted()) {
+    // False for a fault that needs a restart: read() keeps raising it, so
+    // the supervisor refuses the reset in the first place.
+    if (set_->request_fault_reset()) {
+      reset_ = Reset::kClearing;
+      resets_failed_seen_ = set_->fault_resets_failed();
+    }
+  } else if (!(last_status_ & bs::kDrivesEnabled)) {
+    // E.g. after an enable timeout: try the CiA 402 enable path again.
+    set_->request_enable();
+    reset_ = Reset::kEnabling;
+    reset_deadline_us_ = now_us_ + std::int64_t(can_.master.enable_timeout_ms) * 1000;
+  }
+}
+
+bool CanBackend::next_fault_note(BackendFaultNote& out) {
+  Note n;
+  if (!notes_.try_pop(n)) return false;
+  out.cycle = n.cycle;
+  out.status = n.status;
+  out.text = "can backend: " + describe(n);
+  return true;
+}
+
+bool CanBackend::next_raw_batch(manip::can_frames_t& out, std::size_t max_frames) {
+  if (!recorder_ || recorder_->size_approx() == 0) return false;
+  out.n_interfaces = static_cast<std::int32_t>(can_.buses.size());
+  out.interfaces.clear();
+  for (const auto& b : can_.buses) out.interfaces.push_back(b.interface);
+  out.cycle.clear();
+  out.t_us.clear();
+  out.iface.clear();
+  out.id.clear();
+  out.flags.clear();
+  out.dlc.clear();
+  out.data.clear();
+  cc::RecordedFrame r;
+  while (out.cycle.size() < max_frames && recorder_->pop(r)) {
+    out.cycle.push_back(r.cycle);
+    out.t_us.push_back(r.t_us);
+    out.iface.push_back(static_cast<std::int8_t>(r.iface));
+    out.id.push_back(static_cast<std::int32_t>(r.frame.id));
+    std::int8_t fl = 0;
+    if (r.tx) fl |= manip::can_frames_t::FLAG_TX;
+    if (r.frame.is_error()) fl |= manip::can_frames_t::FLAG_ERROR;
+    if (r.frame.is_rtr()) fl |= manip::can_frames_t::FLAG_RTR;
+    out.flags.push_back(fl);
+    out.dlc.push_back(static_cast<std::int8_t>(r.frame.dlc));
+    std::vector<std::int8_t> d(8);
+    for (int i = 0; i < 8; ++i) d[std::size_t(i)] = static_cast<std::int8_t>(r.frame.data[i]);
+    out.data.push_back(std::move(d));
+  }
+  out.n = static_cast<std::int32_t>(out.cycle.size());
+  out.dropped_total = recorder_->dropped();
+  return out.n > 0;
 }
 
 }  // namespace manip::hardware

@@ -1,5 +1,6 @@
 #include "manip/runtime/logger.hpp"
 
+#include <cstdint>
 #include <chrono>
 #include <cstdio>
 #include <thread>
@@ -115,6 +116,10 @@ void Logger::handle(const LoopRecord& r) {
     ring_head_ = (ring_head_ + 1) % ring_.size();
     if (ring_fill_ < ring_.size()) ++ring_fill_;
     ++stats_.states;
+    last_fault_flags_ = static_cast<std::uint32_t>(s->fault_flags);
+    // Every record of earlier cycles is handled: a backend note of those
+    // cycles that no fault record took gets a record of its own.
+    if (!notes_.empty()) write_pending_notes(s->cycle);
     write(channels::kState, s->utime, *s);
     if (flush_every_states_ > 0 && ++states_since_flush_ >= flush_every_states_) maybe_flush(true);
   } else if (const auto* e = std::get_if<TrialEventRecord>(&r)) {
@@ -128,6 +133,23 @@ void Logger::handle(const LoopRecord& r) {
     m.cycle = f->cycle;
     m.fault_flags = static_cast<std::int32_t>(f->fault_flags);
     m.reason = fault_reason(*f);
+    // The backend's own reason (e.g. "can backend: node 1: heartbeat lost
+    // (after 152 ms)"), queued by the loop in this cycle's read(), before the
+    // supervisor pushed this record: visible now.
+    if (tap_ && (f->new_flags & (fault::kBackend | fault::kHardwareEStop))) {
+      poll_notes();
+      for (auto it = notes_.begin(); it != notes_.end(); ++it) {
+        const std::uint32_t bits =
+            ((it->status & (backend_status::kDriveFault | backend_status::kBackendError)) ? fault::kBackend : 0u) |
+            ((it->status & backend_status::kHwEStopOpen) ? fault::kHardwareEStop : 0u);
+        if (it->cycle >= 0 && it->cycle <= f->cycle && (bits & f->new_flags)) {
+          m.reason += "; " + it->text;
+          ++stats_.backend_notes;
+          notes_.erase(it);
+          break;
+        }
+      }
+    }
     // History: the last N states, but none already written in an earlier
     // fault's history. Every state is in the log anyway; the history is a
     // convenience copy, and an ESTOP/FAULT_RESET storm (a new latch every
@@ -175,6 +197,44 @@ void Logger::print_fault(const manip::fault_t& m, std::uint32_t flags) {
                static_cast<long long>(m.cycle), m.reason.c_str(), fault_names(flags).c_str(), m.n_history);
 }
 
+void Logger::poll_notes() {
+  if (!tap_) return;
+  hardware::BackendFaultNote n;
+  while (tap_->next_fault_note(n)) notes_.push_back(std::move(n));
+}
+
+void Logger::write_pending_notes(std::int64_t before_cycle) {
+  while (!notes_.empty() && notes_.front().cycle < before_cycle) {
+    const hardware::BackendFaultNote n = std::move(notes_.front());
+    notes_.pop_front();
+    manip::fault_t m{};
+    m.utime = last_utime_;
+    m.cycle = n.cycle;
+    m.fault_flags = static_cast<std::int32_t>(last_fault_flags_);
+    m.reason = n.text;
+    m.n_history = 0;
+    ++stats_.events;
+    ++stats_.backend_notes;
+    write(channels::kFault, m.utime, m);
+    if (print_faults_) print_fault(m, last_fault_flags_);
+    if (fault_sink_) fault_sink_(m);
+  }
+}
+
+void Logger::drain_raw() {
+  if (!tap_) return;
+  // Bounded batches (~4096 x 30 bytes): one event stays small, the logger
+  // keeps up with two buses at 2 kHz SYNC (~16 000 frames/s).
+  while (tap_->next_raw_batch(raw_, 4096)) {
+    raw_.utime = last_utime_;
+    stats_.raw_frames += raw_.n;
+    ++stats_.raw_batches;
+    ++stats_.events;
+    stats_.raw_frames_dropped = raw_.dropped_total;
+    write(channels::kCanRaw, raw_.utime, raw_);
+  }
+}
+
 void Logger::handle_aux(const AuxRecord& r) {
   ++stats_.events;
   if (const auto* h = std::get_if<manip::health_t>(&r))
@@ -204,6 +264,7 @@ std::int64_t Logger::events_on_disk() const {
 
 std::size_t Logger::drain() {
   std::size_t n = 0;
+  poll_notes();  // before the records: a record's note is queued before the record
   LoopRecord r;
   while (q_.try_pop(r)) {
     handle(r);
@@ -217,6 +278,9 @@ std::size_t Logger::drain() {
       ++n;
     }
   }
+  drain_raw();
+  // Notes from outside the loop (shutdown) have no record to join.
+  if (!notes_.empty() && notes_.front().cycle < 0) write_pending_notes(0);
   maybe_flush(false);
   stats_.events_in_file = events_on_disk();
   publish_stats();
@@ -234,6 +298,8 @@ void Logger::run(const std::atomic<bool>& stop) {
 
 bool Logger::close(std::string& err) {
   drain();
+  poll_notes();
+  write_pending_notes(INT64_MAX);  // whatever no record took
   if (open_) {
     maybe_flush(true);
     const bool failed_before = failed();

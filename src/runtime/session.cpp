@@ -78,6 +78,10 @@ std::string RunReport::summary() const {
   if (log.discarded) os << ", " << log.discarded << " records discarded after the write failure";
   if (log.fault_history_states) os << ", " << log.fault_history_states << " states in fault histories";
   if (log.faults_not_printed) os << ", " << log.faults_not_printed << " fault lines not printed (rate limit)";
+  if (log.backend_notes) os << ", " << log.backend_notes << " backend fault texts";
+  if (log.raw_batches)
+    os << "\n  raw CAN frames: " << log.raw_frames << " logged on MANIP_CAN_RAW in " << log.raw_batches << " batches, "
+       << log.raw_frames_dropped << " dropped (queue full)";
   os << "\n  faults latched at exit: " << control::fault_names(fault_flags) << "\n";
   return os.str();
 }
@@ -245,6 +249,7 @@ RunReport run_session(const RtConfig& cfg, hardware::Backend& backend, const Run
     logger.set_fault_sink([b = bus.get()](const manip::fault_t& f) { b->publish_fault(f); });
   }
   logger.set_aux_queue(want_log && want_bus ? &aux_q : nullptr);
+  logger.set_backend_tap(want_log ? backend.log_tap() : nullptr);
 
   // --- backend: configure (slow, may fail; drives disabled), then enable --------
   try {

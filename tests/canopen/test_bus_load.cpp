@@ -53,6 +53,24 @@ TEST_CASE("canopen bus load: one bus per drive at 2 kHz, velocity TPDO2 does not
   CHECK_FALSE(b[0].ok());
 }
 
+TEST_CASE("canopen bus load: 0x60FD digital inputs in TPDO2 are in the budget") {
+  auto cfg = canopen_test::parse_ok(canopen_test::kTwoBuses);
+  cfg.master.max_bus_load = 0.75;
+  // instead of the velocity: TPDO2 = 0x60FD (4 bytes, 95 bits) -> as with velocity, 72.6 %
+  for (auto& d : cfg.drives) d.tpdo2.add(PdoObject::DigitalInputs);
+  auto b = compute_budgets(cfg);
+  CHECK(b[0].cyclic_bits_per_sync == 55 + 95 + 115 + 95);
+  CHECK(b[0].bits_per_s == Approx(360.0 * 2000 + 20 * 65 + 50 * 65 + 10 * 135));  // 725900
+  CHECK(b[0].ok());
+  CHECK(b[0].table().find("TPDO2") != std::string::npos);
+  // velocity and 0x60FD: TPDO2 8 bytes (135 bits) -> 400 bits per SYNC, 80.6 %: refused at 75 %
+  for (auto& d : cfg.drives) d.tpdo2.add(PdoObject::VelocityActual);
+  b = compute_budgets(cfg);
+  CHECK(b[0].cyclic_bits_per_sync == 55 + 95 + 115 + 135);
+  CHECK(b[0].bits_per_s == Approx(400.0 * 2000 + 5900));  // 805900
+  CHECK_FALSE(b[0].ok());
+}
+
 TEST_CASE("canopen bus load: the master refuses to start an over-budget bus, before sending anything") {
   auto cfg = canopen_test::parse_ok(canopen_test::kSharedBus);
   cfg.master.sync_period_us = 500;

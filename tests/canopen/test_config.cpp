@@ -70,6 +70,16 @@ TEST_CASE("canopen config: unknown keys, wrong types, ranges and cross checks wi
     CHECK(has(e, "bus.yml:23: nodes.stage_x.heartbeat_timeout_ms: must exceed heartbeat_producer_ms"));
     CHECK(has(e, "bus.yml:31: nodes.stage_y.sign: must be +1 or -1"));
   }
+  SECTION("the e-stop input on 0x60FD must be mapped in every drive's TPDOs") {
+    t += "backend:\n  estop_input_bit: 16\n";
+    t.replace(t.find("    sign: -1\n"), 13, "    sign: -1\n    tpdo2: [digital_inputs]\n");
+    const auto e = errors_of(t);
+    CHECK(has(e, "bus.yml:23: nodes.stage_x.tpdo2: backend.estop_input_bit needs digital_inputs (0x60FD) mapped in tpdo or tpdo2 of every drive"));
+    for (const auto& x : e) CHECK(x.find("stage_y") == std::string::npos);  // stage_y maps it
+    std::string u = canopen_test::kTwoBuses;
+    u += "backend:\n  estop_input_bit: 32\n";
+    CHECK(has(errors_of(u), "bus.yml:33: backend.estop_input_bit: value 32 out of range [-1, 31]"));
+  }
   SECTION("missing file") {
     CanConfig c;
     std::vector<std::string> e;

@@ -9,6 +9,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -17,7 +19,13 @@
 #include "alloc_counter.hpp"
 #include "sanitized.hpp"
 
+#include "manip/can_frames_t.hpp"
 #include "manip/canopen/error.hpp"
+#include "manip/common/channels.hpp"
+#include "manip/fault_t.hpp"
+#include "manip/logging/event_log.hpp"
+#include "manip/command_t.hpp"
+#include "manip/control/controller.hpp"
 #include "manip/estimation/session_estimator.hpp"
 #include "manip/hardware/can_backend.hpp"
 #include "manip/runtime/config.hpp"
@@ -235,6 +243,7 @@ TEST_CASE("can backend: faults mid-session reach the safe state within one SYNC 
   std::string reason_word;
   std::uint32_t bit = 0;
   int max_cycles = 8;
+  bool acknowledgeable = true;  // the operator's FAULT_RESET can clear it (no restart)
   SECTION("drive enters Fault") {
     b.sim_drive(0)->enter_fault(0x2310, 0);  // continuous over-current
     bit = bs::kDriveFault;
@@ -250,6 +259,7 @@ TEST_CASE("can backend: faults mid-session reach the safe state within one SYNC 
     bit = bs::kBackendError;
     reason_word = "heartbeat";
     max_cycles = 4 * 200;  // consumer time 150 ms
+    acknowledgeable = false;
   }
   SECTION("TPDOs stop") {
     b.sim_drive(0)->faults().drop_all_tpdos = true;
@@ -261,9 +271,19 @@ TEST_CASE("can backend: faults mid-session reach the safe state within one SYNC 
   REQUIRE(n > 0);
   CHECK(b.fault_reason().find(reason_word) != std::string::npos);
   check_safe_next_cycle(l);
-  // latched: stays raised
-  l.cycle();
-  CHECK((l.r.status & bit) != 0);
+  // Latched: the master holds the safe state and the reason until the
+  // operator's reset. An acknowledgeable fault raised its bit in the
+  // detecting cycle (the supervisor latches it) and is no longer "present",
+  // so FAULT_RESET can be accepted; one that needs a restart stays present.
+  for (int i = 0; i < 40; ++i) l.cycle();
+  CHECK(b.drives().faulted());
+  CHECK(b.fault_reason().find(reason_word) != std::string::npos);
+  CHECK(((l.r.status & bit) != 0) == !acknowledgeable);
+  CHECK(b.drives().fault_acknowledgeable() == acknowledgeable);
+  for (int a = 0; a < 2; ++a) {
+    CHECK(b.sim_drive(a)->state() != cc::cia402::State::OperationEnabled);
+    CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
+  }
 }
 
 TEST_CASE("can backend: a warning EMCY (temperature class) is logged by the master, no fault", "[can_backend]") {
@@ -300,20 +320,35 @@ TEST_CASE("can backend: e-stop / STO reported by the drive is a latched hardware
 
 TEST_CASE("can backend: the real-time path does not allocate", "[can_backend][no_alloc]") {
   const auto cfg = rt_cfg();
-  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  auto can = can_cfg();
+  // Raw-frame recording on, with a queue nobody drains here: the drop path too.
+  can.backend.record_raw_frames = true;
+  can.backend.raw_queue_frames = 1024;
+  hw::CanBackend b(cfg, cfg.sim, can);
   started(b);
   Loop l{b};
   for (int i = 0; i < 100; ++i) l.cycle(Vec2(3.0, -3.0));
   manip::test::AllocCounts got;
+  bool faulted = false, raised = false;
   {
     const manip::test::ThreadAllocScope s;
     for (int i = 0; i < 4000; ++i) l.cycle(Vec2(3.0, -3.0));
     b.sim_drive(0)->enter_fault(0x2310, 0);  // the fault path too
-    for (int i = 0; i < 20; ++i) l.cycle();
+    for (int i = 0; i < 20; ++i) {
+      l.cycle();
+      raised |= (l.r.status & bs::kDriveFault) != 0;
+    }
+    faulted = b.drives().faulted();
+    b.request_fault_reset();  // ... and the operator's reset, re-enable included
+    for (int i = 0; i < 400; ++i) l.cycle(Vec2(3.0, -3.0));
     got = s.counts();
   }
   CHECK(got.news == 0);
-  CHECK((l.r.status & bs::kDriveFault) != 0);
+  CHECK(raised);
+  CHECK(faulted);
+  CHECK(l.r.status == bs::kDrivesEnabled);
+  CHECK(b.raw_frames_dropped() > 0);
+  CHECK(b.recorder()->size_approx() == b.recorder()->capacity());
 }
 
 namespace {
@@ -392,6 +427,8 @@ class Injecting final : public hw::Backend {
   }
   void write(const manip::control::ActuatorCommand& c) override { in_.write(c); }
   void display(const manip::control::DisplayCue& c) override { in_.display(c); }
+  void request_fault_reset() noexcept override { in_.request_fault_reset(); }
+  hw::BackendLogTap* log_tap() noexcept override { return in_.log_tap(); }
   std::int64_t first_fault_{-1};
 
  private:
@@ -443,4 +480,509 @@ TEST_CASE("can backend in run_session: a drive fault mid-session ends it with th
   CHECK(can_b.fault_reason().find(word) != std::string::npos);
   REQUIRE(b.first_fault_ > 0);
   for (int a = 0; a < 2; ++a) CHECK(can_b.sim_drive(a)->applied_force_n() == 0.0);
+}
+
+// ---------------------------------------------------------------------------
+// Operator fault reset (docs/hardware.md "Operator fault reset").
+
+namespace {
+// The loop as manip_rt runs it (runtime::RtCycle: read -> Controller::step ->
+// write, the supervisor's accepted FAULT_RESET -> backend.request_fault_reset),
+// cycle by cycle, with the operator's commands through the command queue.
+struct SupervisedLoop {
+  explicit SupervisedLoop(const manip::runtime::RtConfig& c, hw::CanBackend& backend)
+      : cfg(c),
+        log(c.loop.log_queue_capacity),
+        bus(c.loop.bus_queue_capacity),
+        cmds(c.loop.command_queue_capacity),
+        ctl(c, {&log, &bus, &cmds}, manip::control::ControllerOptions{false, false, 0, 1'700'000'000'000'000}),
+        b(backend),
+        body(backend, ctl) {}
+  const manip::runtime::RtConfig& cfg;
+  manip::runtime::RecordQueue log, bus;
+  manip::runtime::CommandQueue cmds;
+  manip::control::Controller ctl;
+  hw::CanBackend& b;
+  manip::runtime::RtCycle body;
+  std::int64_t k{0};
+  std::vector<manip::control::CommandResultRecord> results;
+  std::vector<manip::control::FaultRecord> faults;
+  // The loop only (no draining): for the allocation counter.
+  void cycles(int n) {
+    for (int i = 0; i < n; ++i) body.run_cycle(k++, false);
+  }
+  void run(int n) {
+    cycles(n);
+    drain();
+  }
+  void drain() {
+    manip::control::LoopRecord r;
+    while (log.try_pop(r)) {
+      if (auto* c = std::get_if<manip::control::CommandResultRecord>(&r)) results.push_back(*c);
+      if (auto* f = std::get_if<manip::control::FaultRecord>(&r)) faults.push_back(*f);
+    }
+    while (bus.try_pop(r)) {
+    }
+  }
+  void command(std::int8_t kind) {
+    manip::control::Command c;
+    c.kind = kind;
+    c.seq = k;
+    REQUIRE(cmds.try_push(c));
+  }
+  // Cycles until pred() holds; -1 if not within max.
+  template <class P>
+  int until(P pred, int max) {
+    for (int i = 1; i <= max; ++i) {
+      run(1);
+      if (pred()) return i;
+    }
+    return -1;
+  }
+  manip::control::Mode mode() const { return ctl.mode(); }
+};
+}  // namespace
+
+TEST_CASE("can backend: operator FAULT_RESET clears a drive fault, re-enables the drives and torque flows again",
+          "[can_backend][fault_reset]") {
+  using manip::control::Mode;
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  started(b);
+  SupervisedLoop s(cfg, b);
+  s.run(2000);  // 0.5 s: INIT -> RUNNING (autostart), the person holds the handle
+  REQUIRE(s.mode() == Mode::kRunning);
+  REQUIRE(s.body.reading().status == bs::kDrivesEnabled);
+  cc::SimulatedDrive& d = *b.sim_drive(0);
+
+  d.enter_fault(0x2310, 0);  // over-current: CiA 402 Fault + faulting EMCY
+  REQUIRE(s.until([&] { return s.mode() == Mode::kFault; }, 8) > 0);
+  s.run(2);  // within one SYNC period: both drives disabled, no force
+  for (int a = 0; a < 2; ++a) {
+    CHECK(b.sim_drive(a)->state() != cc::cia402::State::OperationEnabled);
+    CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
+  }
+  REQUIRE(s.faults.size() == 1);
+  CHECK((s.faults[0].new_flags & manip::control::fault::kBackend) != 0);
+
+  // Nobody resets: the drive stays in Fault, bit 7 is never set, the
+  // supervisor stays in FAULT (safe law) and the master keeps zero torque.
+  s.run(4000);
+  CHECK(d.state() == cc::cia402::State::Fault);
+  CHECK(d.fault_resets() == 0);
+  CHECK((d.controlword() & cc::cia402::cw::kFaultResetBit) == 0);
+  CHECK(s.mode() == Mode::kFault);
+  CHECK((s.body.reading().status & bs::kDriveFault) == 0);  // latched, acknowledgeable: not "present"
+
+  // The operator's FAULT_RESET: accepted, one rising edge, Switch on
+  // disabled, transitions 2-3-4 back to Operation enabled (within
+  // enable_timeout_ms), the session held in PAUSED until RESUME.
+  s.command(manip::command_t::FAULT_RESET);
+  s.run(1);
+  REQUIRE_FALSE(s.results.empty());
+  CHECK(s.results.back().kind == manip::command_t::FAULT_RESET);
+  CHECK(s.results.back().accepted);
+  CHECK(s.mode() == Mode::kPaused);
+  const int n = s.until([&] { return (s.body.reading().status & bs::kDrivesEnabled) != 0; }, 4 * 500);
+  INFO("cycles to Operation enabled after the reset: " << n);
+  REQUIRE(n > 0);
+  CHECK(d.fault_resets() == 1);  // exactly one edge
+  CHECK(d.state() == cc::cia402::State::OperationEnabled);
+  CHECK_FALSE(b.drives().faulted());
+  CHECK(b.fault_reason().empty());  // acknowledged: the next fault gets a fresh reason
+  CHECK(s.mode() == Mode::kPaused);  // hold: admittance, no trials
+  s.command(manip::command_t::RESUME);
+  double max_force = 0;
+  for (int i = 0; i < 4000; ++i) {
+    s.run(1);
+    max_force = std::max(max_force, std::abs(d.applied_force_n()));
+  }
+  CHECK(s.mode() == Mode::kRunning);
+  CHECK(s.body.reading().status == bs::kDrivesEnabled);
+  CHECK(max_force > 0.5);  // torque flows again: the admittance renders the person's push
+  CHECK(s.faults.size() == 1);
+}
+
+TEST_CASE("can backend: a reset that cannot clear never does; a fault that needs a restart refuses the reset",
+          "[can_backend][fault_reset]") {
+  using manip::control::Mode;
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  started(b);
+  SupervisedLoop s(cfg, b);
+  s.run(2000);
+  REQUIRE(s.mode() == Mode::kRunning);
+
+  SECTION("the drive's cause persists: one edge, still Fault, raised again with its reason") {
+    cc::SimulatedDrive& d = *b.sim_drive(1);
+    d.faults().fault_persists = true;
+    d.enter_fault(0x4310, 0);  // drive over-temperature (a warning EMCY, but the drive trips: Fault)
+    REQUIRE(s.until([&] { return s.mode() == Mode::kFault; }, 8) > 0);
+    s.run(400);
+    s.command(manip::command_t::FAULT_RESET);
+    s.run(1);
+    REQUIRE(s.results.back().accepted);
+    // fault_reset_timeout_ms (20 ms) later: raised again, with the reason
+    const int back = s.until([&] { return s.mode() == Mode::kFault; }, 4 * 100);
+    REQUIRE(back > 0);
+    CHECK(back >= 4 * 20);
+    CHECK(d.fault_resets() == 0);
+    CHECK(d.state() == cc::cia402::State::Fault);
+    INFO("reason: " << b.fault_reason() << "; supervisor faults " << s.faults.size() << ", last flags " << s.faults.back().new_flags);
+    CHECK(b.fault_reason().find("fault reset did not clear") != std::string::npos);
+    CHECK(b.fault_reason().find("node 1") != std::string::npos);
+    // No further edges behind the operator's back.
+    int edges = 0;
+    std::uint16_t prev = d.controlword();
+    for (int i = 0; i < 2000; ++i) {
+      s.run(1);
+      const std::uint16_t c = d.controlword();
+      edges += (c & 0x80) && !(prev & 0x80);
+      prev = c;
+    }
+    CHECK(edges == 0);
+    CHECK(d.state() == cc::cia402::State::Fault);
+    // The cause gone, a second reset clears it.
+    d.faults().fault_persists = false;
+    s.command(manip::command_t::FAULT_RESET);
+    s.run(1);
+    CHECK(s.results.back().accepted);
+    REQUIRE(s.until([&] { return (s.body.reading().status & bs::kDrivesEnabled) != 0; }, 4 * 500) > 0);
+    CHECK(d.fault_resets() == 1);
+    CHECK(d.state() == cc::cia402::State::OperationEnabled);
+  }
+  SECTION("heartbeat loss: condition present, reset refused, drives stay disabled") {
+    b.sim_drive(0)->faults().heartbeat_stopped = true;
+    REQUIRE(s.until([&] { return s.mode() == Mode::kFault; }, 4 * 200) > 0);
+    s.run(40);
+    s.command(manip::command_t::FAULT_RESET);
+    s.run(1);
+    REQUIRE_FALSE(s.results.empty());
+    CHECK_FALSE(s.results.back().accepted);
+    CHECK(s.results.back().reason == manip::control::Reject::kConditionPresent);
+    s.run(400);
+    CHECK(s.mode() == Mode::kFault);
+    CHECK(b.drives().faulted());
+    for (int a = 0; a < 2; ++a) CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
+  }
+}
+
+TEST_CASE("can backend in run_session: the CANopen reason and the raw CAN traffic are in the log",
+          "[can_backend][session][log]") {
+  const auto base = rt_cfg();
+  const auto cfg = manip::runtime::load_rt_config(kSrc + "/config/rt.yaml", manip::runtime::trials_overrides(base, 2));
+  auto can = can_cfg();
+  can.backend.record_raw_frames = true;
+  hw::CanBackend can_b(cfg, cfg.sim, can);
+  // over-current with Copley's event status bit 0 (short circuit detected)
+  Injecting b(can_b, 8000, [](hw::CanBackend& x) { x.sim_drive(1)->enter_fault(0x2310, 0x1); });
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("manip_can_log_" + std::to_string(::getpid()) + ".lcm")).string();
+  auto opt = offline_run_options(path);
+  opt.exit_on_fault = true;
+  std::ostringstream out;
+  const auto rep = manip::runtime::run_session(cfg, b, opt, out);
+  INFO(out.str());
+  REQUIRE(rep.exit_code == 7);
+
+  std::vector<manip::fault_t> faults;
+  std::int64_t frames = 0, batches = 0, dropped = -1, last_cycle = -1;
+  std::int64_t startup_frames = 0, sdo_in_loop = 0, sdo_at_startup = 0, emcy_cycle = -2, fault_tpdo_cycle = -2;
+  std::int64_t syncs[2] = {0, 0}, tpdo1[2] = {0, 0};
+  std::vector<std::string> ifaces;
+  {
+    manip::logging::EventLogReader rd(path);
+    manip::logging::RawEvent ev;
+    while (rd.next(ev)) {
+      const auto n = static_cast<int>(ev.data.size());
+      if (ev.channel == manip::channels::kFault) {
+        manip::fault_t f;
+        REQUIRE(f.decode(ev.data.data(), 0, n) == n);
+        faults.push_back(f);
+      } else if (ev.channel == manip::channels::kState) {
+        manip::state_t st;
+        REQUIRE(st.decode(ev.data.data(), 0, n) == n);
+        last_cycle = st.cycle;
+      } else if (ev.channel == manip::channels::kCanRaw) {
+        manip::can_frames_t m;
+        REQUIRE(m.decode(ev.data.data(), 0, n) == n);
+        ++batches;
+        frames += m.n;
+        dropped = m.dropped_total;
+        ifaces = m.interfaces;
+        for (int i = 0; i < m.n; ++i) {
+          const bool tx = m.flags[i] & manip::can_frames_t::FLAG_TX;
+          const std::uint32_t id = static_cast<std::uint32_t>(m.id[i]);
+          const int bus = m.iface[i];
+          REQUIRE((bus == 0 || bus == 1));
+          const bool sdo = (id & 0x780) == 0x580 || (id & 0x780) == 0x600;
+          if (m.cycle[i] < 0) {
+            ++startup_frames;
+            sdo_at_startup += sdo;
+          } else {
+            sdo_in_loop += sdo;
+            if (tx && id == 0x080) ++syncs[bus];
+            if (!tx && id == 0x181) ++tpdo1[bus];
+            if (!tx && id == 0x081 && bus == 1 && emcy_cycle == -2) emcy_cycle = m.cycle[i];
+            // statusword (first 2 bytes of TPDO1) with the CiA 402 Fault bit 3
+            if (!tx && id == 0x181 && bus == 1 && fault_tpdo_cycle == -2 && (m.data[i][0] & 0x08))
+              fault_tpdo_cycle = m.cycle[i];
+          }
+        }
+      }
+    }
+  }
+  std::filesystem::remove(path);
+
+  // The decoded CANopen reason is in the supervisor's fault record of the cycle.
+  REQUIRE_FALSE(faults.empty());
+  INFO("fault reason: " << faults.front().reason);
+  CHECK(faults.front().reason.find("backend") == 0);
+  CHECK(faults.front().reason.find("; can backend: node 1: ") != std::string::npos);
+  CHECK(faults.front().reason.find("Fault (statusword 0x") != std::string::npos);
+  CHECK(rep.log.backend_notes >= 1);
+  // After the session, Copley's event status register (0x1002) of each drive, read at shutdown
+  bool event_status = false;
+  for (const auto& f : faults)
+    event_status |= f.cycle == -1 && f.reason.find("can backend: node 1: event status register 0x1002") == 0 &&
+                    f.reason.find("short circuit detected") != std::string::npos;
+  CHECK(event_status);
+
+  // Raw traffic: every frame, candump-like, aligned with the states' cycles.
+  INFO("raw frames " << frames << " in " << batches << " batches; start-up " << startup_frames << "; SYNC " << syncs[0]
+                     << "/" << syncs[1] << ", TPDO1 " << tpdo1[0] << "/" << tpdo1[1] << "; last cycle " << last_cycle);
+  CHECK(ifaces == std::vector<std::string>{"can0", "can1"});
+  CHECK(dropped == 0);
+  CHECK(frames == rep.log.raw_frames);
+  CHECK(sdo_at_startup > 50);  // the SDO start-up list (both drives)
+  CHECK(sdo_in_loop == 0);     // never an SDO in the cyclic phase
+  for (int bus = 0; bus < 2; ++bus) {
+    // one SYNC per drive tick (2 kHz of the 4 kHz loop) up to the fault,
+    // then the master's safe SYNCs until the loop stops
+    CHECK(std::abs(syncs[bus] - (last_cycle + 1) / 2) <= 4);
+    CHECK(std::abs(tpdo1[bus] - syncs[bus]) <= 4);
+  }
+  // The TPDO reporting Fault was received in the very cycle the fault record
+  // names; the drive's EMCY (0x2310) is recorded too.
+  CHECK(fault_tpdo_cycle == faults.front().cycle);
+  CHECK(emcy_cycle >= faults.front().cycle);
+}
+
+namespace {
+// A backend's log tap with notes handed in by the test.
+struct FakeTap final : hw::BackendLogTap {
+  std::vector<hw::BackendFaultNote> notes;
+  bool next_fault_note(hw::BackendFaultNote& out) override {
+    if (notes.empty()) return false;
+    out = notes.front();
+    notes.erase(notes.begin());
+    return true;
+  }
+};
+manip::state_t state_at(std::int64_t cycle, std::uint32_t flags) {
+  manip::state_t s{};
+  s.cycle = cycle;
+  s.utime = 1'700'000'000'000'000 + cycle * 250;
+  s.fault_flags = static_cast<std::int32_t>(flags);
+  return s;
+}
+}  // namespace
+
+TEST_CASE("logger: a backend note joins the fault record of its cycle, or gets a record of its own",
+          "[can_backend][log]") {
+  namespace fl = manip::control::fault;
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("manip_notes_" + std::to_string(::getpid()) + ".lcm")).string();
+  manip::runtime::RecordQueue q(64);
+  manip::runtime::Logger logger(q, 4, 10.0);
+  logger.set_print_faults(false);
+  FakeTap tap;
+  logger.set_backend_tap(&tap);
+  std::string err;
+  manip::session_t session{};
+  REQUIRE(logger.open(path, session, err, true));
+  // cycle 10: the backend noted "A"; the supervisor raised kBackend in the same cycle
+  tap.notes.push_back({10, bs::kDriveFault, "can backend: A"});
+  REQUIRE(q.try_push(state_at(9, 0)));
+  manip::control::FaultRecord f;
+  f.cycle = 10;
+  f.new_flags = f.fault_flags = fl::kBackend;
+  REQUIRE(q.try_push(f));
+  REQUIRE(q.try_push(state_at(10, fl::kBackend)));
+  logger.drain();
+  // cycle 20: note "B" with no new supervisor bit (already latched): own record once cycle 21 is seen
+  tap.notes.push_back({20, bs::kBackendError, "can backend: B"});
+  REQUIRE(q.try_push(state_at(20, fl::kBackend)));
+  logger.drain();
+  const auto before_21 = logger.stats().backend_notes;
+  REQUIRE(q.try_push(state_at(21, fl::kBackend)));
+  logger.drain();
+  const auto after_21 = logger.stats().backend_notes;
+  // at shutdown (outside the loop): "C"
+  tap.notes.push_back({-1, bs::kBackendError, "can backend: C"});
+  REQUIRE(logger.close(err));
+  CHECK(before_21 == 1);
+  CHECK(after_21 == 2);
+
+  std::vector<manip::fault_t> faults;
+  {
+    manip::logging::EventLogReader rd(path);
+    manip::logging::RawEvent ev;
+    while (rd.next(ev))
+      if (ev.channel == manip::channels::kFault) {
+        manip::fault_t m;
+        const auto n = static_cast<int>(ev.data.size());
+        REQUIRE(m.decode(ev.data.data(), 0, n) == n);
+        faults.push_back(m);
+      }
+  }
+  std::filesystem::remove(path);
+  REQUIRE(faults.size() == 3);
+  CHECK(faults[0].cycle == 10);
+  CHECK(faults[0].reason.find("backend") == 0);
+  CHECK(faults[0].reason.find("; can backend: A") != std::string::npos);
+  CHECK(faults[0].n_history > 0);
+  CHECK(faults[1].cycle == 20);
+  CHECK(faults[1].reason == "can backend: B");
+  CHECK(faults[1].fault_flags == static_cast<std::int32_t>(fl::kBackend));
+  CHECK(faults[1].n_history == 0);
+  CHECK(faults[2].cycle == -1);
+  CHECK(faults[2].reason == "can backend: C");
+}
+
+TEST_CASE("can backend: the e-stop chain on digital input 0x60FD (TPDO2) is a latched hardware e-stop with its reason",
+          "[can_backend][estop]") {
+  const auto cfg = rt_cfg();
+  auto can = can_cfg();
+  can.backend.estop_input_bit = 16;          // the chain's contact on the drive's input 16 (manufacturer-specific)
+  can.backend.estop_input_open_high = false;  // closed chain holds it high
+  for (auto& d : can.drives) {  // TPDO2 carries 0x60FD instead of the velocity
+    d.tpdo2 = cc::PdoMapping{};
+    d.tpdo2.add(cc::PdoObject::DigitalInputs);
+  }
+  hw::CanBackend b(cfg, cfg.sim, can);
+  started(b);
+  CHECK(b.budget_text().find("TPDO2") != std::string::npos);
+  CHECK(b.sim_drive(0)->od_value(0x1A01, 1) == 0x60FD0020u);  // mapped by the start-up SDO list
+  Loop l{b};
+  for (int i = 0; i < 400; ++i) l.cycle(Vec2(2.0, 2.0));
+  REQUIRE(l.r.status == bs::kDrivesEnabled);  // closed chain: no e-stop
+  b.sim_drive(1)->faults().digital_inputs &= ~(1u << 16);  // open the chain at the drive of axis 1
+  const int n = l.until(bs::kHwEStopOpen, 4);  // next TPDO2: within 2 SYNC periods
+  INFO(b.fault_reason());
+  REQUIRE(n > 0);
+  CHECK(b.fault_reason().find("e-stop chain open") != std::string::npos);
+  CHECK(b.fault_reason().find("0x60FD") != std::string::npos);
+  CHECK(b.fault_reason().find("axis 1") != std::string::npos);
+  hw::BackendFaultNote note;
+  REQUIRE(b.next_fault_note(note));
+  CHECK(note.status == bs::kHwEStopOpen);
+  CHECK(note.text.find("bit 16") != std::string::npos);
+  for (int i = 0; i < 40; ++i) l.cycle();
+  CHECK((l.r.status & bs::kHwEStopOpen) != 0);  // present while the chain is open
+  b.sim_drive(1)->faults().digital_inputs |= 1u << 16;  // closed again
+  for (int i = 0; i < 4; ++i) l.cycle();
+  CHECK((l.r.status & bs::kHwEStopOpen) == 0);  // not present: the operator may reset
+  CHECK_FALSE(b.fault_reason().empty());         // the reason stays latched until then
+}
+
+TEST_CASE("can backend: the whole loop (RtCycle, controller, CAN) stays allocation-free with raw recording, a drive "
+          "fault and the operator's reset", "[can_backend][no_alloc][fault_reset]") {
+  using manip::control::Mode;
+  const auto cfg = rt_cfg();
+  auto can = can_cfg();
+  can.backend.record_raw_frames = true;  // default queue (65 536 frames), drained outside the counted region
+  hw::CanBackend b(cfg, cfg.sim, can);
+  started(b);
+  SupervisedLoop s(cfg, b);
+  s.run(2000);
+  REQUIRE(s.mode() == Mode::kRunning);
+  long news = 0;
+  manip::can_frames_t batch;
+  hw::BackendFaultNote note;
+  std::int64_t frames = 0, notes = 0;
+  auto counted = [&](int n) {
+    {
+      const manip::test::ThreadAllocScope scope;
+      s.cycles(n);
+      news += scope.counts().news;
+    }
+    s.drain();  // the logger's side allocates (messages, strings): not the loop
+    while (b.next_raw_batch(batch, 4096)) frames += batch.n;
+    while (b.next_fault_note(note)) ++notes;
+  };
+  for (int i = 0; i < 8; ++i) counted(256);
+  b.sim_drive(0)->enter_fault(0x2310, 0);
+  for (int i = 0; i < 8; ++i) counted(256);
+  REQUIRE(s.mode() == Mode::kFault);
+  s.command(manip::command_t::FAULT_RESET);
+  for (int i = 0; i < 8; ++i) counted(256);
+  REQUIRE(s.mode() == Mode::kPaused);
+  REQUIRE((s.body.reading().status & bs::kDrivesEnabled) != 0);
+  s.command(manip::command_t::RESUME);
+  for (int i = 0; i < 8; ++i) counted(256);
+  CHECK(s.mode() == Mode::kRunning);
+  CHECK(news == 0);
+  CHECK(notes >= 1);
+  CHECK(frames > 4 * 8 * 256);  // ~4 frames per loop cycle on two buses
+  CHECK(b.raw_frames_dropped() == 0);
+}
+
+TEST_CASE("docs/hardware.md: the Python example reads the raw CAN frames next to the session's states",
+          "[can_backend][log][python]") {
+  // The example is taken from the document itself, so the two cannot drift apart.
+  std::ifstream doc(kSrc + "/docs/hardware.md");
+  std::stringstream ds;
+  ds << doc.rdbuf();
+  const std::string text = ds.str();
+  const auto anchor = text.find("Reading it next to the session's state in Python");
+  REQUIRE(anchor != std::string::npos);
+  const auto begin = text.find("```python\n", anchor);
+  REQUIRE(begin != std::string::npos);
+  const auto end = text.find("```", begin + 10);
+  std::string code = text.substr(begin + 10, end - begin - 10);
+
+  const auto base = rt_cfg();
+  const auto cfg = manip::runtime::load_rt_config(kSrc + "/config/rt.yaml", manip::runtime::trials_overrides(base, 2));
+  auto can = can_cfg();
+  can.backend.record_raw_frames = true;
+  hw::CanBackend b(cfg, cfg.sim, can);
+  const std::string dir = std::filesystem::temp_directory_path() / ("manip_rawpy_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  auto opt = offline_run_options(dir + "/session.lcm");
+  opt.duration_s = 0.25;
+  std::ostringstream out;
+  const auto rep = manip::runtime::run_session(cfg, b, opt, out);
+  REQUIRE(rep.exit_code == 0);
+  REQUIRE(rep.log.raw_frames > 0);
+
+  auto replace = [&](const std::string& from, const std::string& to) {
+    const auto at = code.find(from);
+    REQUIRE(at != std::string::npos);
+    code.replace(at, from.size(), to);
+  };
+  replace("\"build/python\"", "\"" + std::string(MANIP_BINARY_DIR) + "/python\"");
+  replace("\"session.lcm\"", "\"" + dir + "/session.lcm\"");
+  {
+    std::ofstream py(dir + "/example.py");
+    py << code;
+  }
+  const std::string python = MANIP_PYTHON;
+  REQUIRE(std::filesystem::exists(python));
+  std::string printed;
+  const int rc = manip::testutil::run_command(python + " " + dir + "/example.py", &printed);
+  std::filesystem::remove_all(dir);
+  INFO(printed.substr(0, 2000));
+  REQUIRE(rc == 0);
+  std::istringstream lines(printed);
+  std::string line;
+  std::int64_t n = 0, sync_tx = 0, with_state = 0;
+  while (std::getline(lines, line)) {
+    ++n;
+    sync_tx += line.find(" TX 080#  x = (") != std::string::npos;  // in the loop (a state of the cycle)
+    with_state += line.find("x = (") != std::string::npos;
+  }
+  CHECK(n == rep.log.raw_frames);           // one candump-like line per logged frame
+  CHECK(std::abs(sync_tx - rep.cycles) <= 4);  // the SYNC of every drive tick (every 2nd cycle) on both buses
+  CHECK(with_state > n / 2);                // the loop's frames sit next to their state
 }

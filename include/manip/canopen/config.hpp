@@ -10,7 +10,9 @@
 namespace manip::canopen {
 
 // Objects manip maps into PDOs (CiA 402-2 object numbers).
-enum class PdoObject : uint8_t { Controlword, TargetTorque, Statusword, PositionActual, VelocityActual };
+// DigitalInputs: CiA 402 0x60FD (32 bits; bits 0-3 limit/home/interlock,
+// 16-31 manufacturer-specific, e.g. the input wired to the e-stop chain).
+enum class PdoObject : uint8_t { Controlword, TargetTorque, Statusword, PositionActual, VelocityActual, DigitalInputs };
 struct ObjectRef {
   uint16_t index;
   uint8_t sub;
@@ -38,6 +40,7 @@ struct MasterConfig {
   uint32_t boot_timeout_ms = 3000;    // deadline for each node's boot-up after NMT reset
   uint32_t sdo_timeout_ms = 100;
   uint32_t enable_timeout_ms = 500;   // CiA 402 to Operation enabled
+  uint32_t fault_reset_timeout_ms = 20;  // a drive still in Fault this long after the reset edge: reset failed
   double max_bus_load = 0.70;         // refuse to start above this worst-case load
   uint32_t tpdo_miss_limit = 2;       // consecutive SYNC periods without TPDO -> fault
   double emcy_headroom_hz = 10.0;     // reserved EMCY frames per node and second in the budget
@@ -83,6 +86,11 @@ struct BackendOptions {
   // (8, 14 or 15; -1 = not wired) and its level when the chain is open.
   int estop_statusword_bit = -1;
   bool estop_active_high = true;
+  // The e-stop chain / STO input read through CiA 402 0x60FD "digital
+  // inputs", mapped into tpdo or tpdo2 of every drive (-1 = not used): the
+  // bit (0..31) wired to the chain and the level that means "open".
+  int estop_input_bit = -1;
+  bool estop_input_open_high = false;  // default: the chain holds the input high while closed
   // CiA 402 0x6041 bit 4 "voltage enabled" dropping while Operation enabled
   // means the power stage lost its supply (STO / contactor of the e-stop chain).
   bool estop_on_voltage_loss = true;
@@ -98,6 +106,11 @@ struct BackendOptions {
   double netft_counts_per_force = 1000000.0;  // Net F/T "counts per force" (its web page / calibration)
   std::string jr3_device = "/dev/jr3";  // jr3pci driver character device
   int jr3_filter = 1;                   // JR3 DSP filter 0..6 (0 = raw)
+  // Raw CAN traffic into the session log (channel MANIP_CAN_RAW, can_frames_t):
+  // every frame sent and received, through a preallocated lock-free queue of
+  // raw_queue_frames frames the logger thread drains; overflow is counted.
+  bool record_raw_frames = false;
+  uint32_t raw_queue_frames = 65536;
 };
 
 struct CanConfig {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "manip/canopen/bus_load.hpp"
+#include "manip/canopen/frame_recorder.hpp"
 #include "manip/canopen/master.hpp"
 #include "manip/common/types.hpp"
 
@@ -20,6 +21,7 @@ struct DriveSetFeedback {
   Vec2 position_m = Vec2::Zero();    // workspace frame
   Vec2 velocity_mps = Vec2::Zero();  // workspace frame (0x606C if mapped, else from positions per SYNC)
   std::array<uint16_t, 2> statusword{};
+  std::array<uint32_t, 2> digital_inputs{};  // 0x60FD (0 if not mapped)
   std::array<cia402::State, 2> state{cia402::State::NotReadyToSwitchOn, cia402::State::NotReadyToSwitchOn};
   bool enabled = false;  // every axis in Operation enabled
   bool faulted = false;  // a master is Faulted/Failed: the command is ignored, drives disabled
@@ -38,7 +40,24 @@ class CanDriveSet {
   void write(const Vec2& force_n);      // workspace-frame force command for this cycle
   Error disable(const Ticker& tick);
   Error shutdown(const Ticker& tick);
-  bool request_fault_reset();           // operator acknowledge (edge on controlword bit 7)
+  // Operator acknowledge: every Faulted bus gets its one edge on controlword
+  // bit 7 (Master::request_fault_reset). False if a bus needs a restart.
+  bool request_fault_reset();
+  // Every faulted bus would accept request_fault_reset() (false if none is faulted).
+  bool fault_acknowledgeable() const;
+  // Real-time re-enable after an acknowledged fault: CiA 402 transitions 2,
+  // 3, 4 driven by write() with zero target torque preloaded, the same path
+  // as enable() without its waiting loop. Ignored while faulted.
+  void request_enable() {
+    if (!faulted()) enable_wanted_ = true;
+  }
+  bool enable_wanted() const { return enable_wanted_; }
+  // Reset attempts (all buses) that left a drive in Fault.
+  uint32_t fault_resets_failed() const;
+
+  // Every frame sent (accepted by the port) and received from now on goes to
+  // `r` (not owned; nullptr = off). Call before configure().
+  void set_recorder(FrameRecorder* r) { recorder_ = r; }
 
   bool faulted() const;
   Error error() const;                  // reason of the first faulted/failed bus ({} if none)
@@ -72,6 +91,7 @@ class CanDriveSet {
   std::vector<FrameBuffer> tx_;  // one per bus, preallocated
   std::vector<uint8_t> tx_failed_;  // a send was refused (queue full / interface down)
   std::array<CanFrame, 64> rx_{};
+  FrameRecorder* recorder_ = nullptr;
 };
 
 }  // namespace manip::canopen

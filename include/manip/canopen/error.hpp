@@ -32,6 +32,7 @@ enum class ErrorCode : uint8_t {
   EnableTimeout,         // CiA 402 did not reach Operation enabled in time
   OperatorStop,          // shutdown/e-stop requested by the operator
   CycleOverrun,          // process() called late: SYNC periods skipped
+  FaultResetFailed,      // an operator fault reset (one edge on 0x6040 bit 7) left the drive in Fault
 };
 
 const char* to_string(ErrorCode c);

@@ -68,6 +68,7 @@ struct NodeStatus {
   uint16_t statusword = 0;
   int32_t position_counts = 0;
   int32_t velocity_units = 0;
+  uint32_t digital_inputs = 0;   // 0x60FD, if mapped
   bool has_feedback = false;
   int64_t feedback_time_us = 0;
   uint32_t tpdo_received = 0;
@@ -132,10 +133,17 @@ class Master {
   void fault(const Error& e, FrameBuffer& tx);
   // Operator fault acknowledge. Only faults the drives can recover from
   // (drive fault, EMCY fault, missing TPDOs) are acknowledgeable; the edge on
-  // controlword bit 7 is then produced by cia402::master_step. Returns false
-  // if the fault needs a full restart (start()).
+  // controlword bit 7 is then produced by cia402::master_step, exactly once
+  // per request and per drive in Fault (CiA 402 transition 15). A drive still
+  // in Fault master.enable_timeout_ms after the request (its cause persists)
+  // ends the attempt: logged as FaultResetFailed, the bus stays Faulted and
+  // acknowledgeable. Returns false if the fault needs a full restart (start()).
   bool request_fault_reset();
   bool fault_reset_pending() const { return fault_reset_requested_; }
+  // Faulted, and request_fault_reset() would be accepted.
+  bool fault_acknowledgeable() const { return phase_ == Phase::Faulted && !needs_restart_; }
+  // Number of reset attempts that ended with a drive still in Fault.
+  uint32_t fault_resets_failed() const { return fault_resets_failed_; }
   void request_shutdown(int64_t now_us);
   // SDOs are start-up/shutdown only: always refused here during the cyclic phase.
   Error request_sdo(uint8_t node, uint16_t index, uint8_t sub);
@@ -183,6 +191,9 @@ class Master {
   uint32_t syncs_in_phase_ = 0;
   bool nmt_reset_pending_ = false;
   bool fault_reset_requested_ = false;
+  int64_t fault_reset_deadline_us_ = 0;
+  std::vector<uint8_t> reset_edge_sent_;  // per node: the one edge of this request is out
+  uint32_t fault_resets_failed_ = 0;
   bool needs_restart_ = false;
   bool faulted_before_shutdown_ = false;
   int shutdown_stage_ = 0;

@@ -55,6 +55,8 @@ struct SimFaults {
   uint32_t reject_abort = 0;        // ...with this abort code
   uint8_t answer_as_node = 0;       // answer SDOs with this node id (0 = own id)
   uint16_t statusword_extra = 0;    // bits ORed into 0x6041 (e.g. a manufacturer-specific STO bit)
+  bool fault_persists = false;      // the fault's cause stays (e.g. over-temperature): a reset edge does not clear it
+  uint32_t digital_inputs = 0x00010000;  // 0x60FD as wired: bit 16 = e-stop chain closed (clear it to open the chain)
 };
 
 class SimulatedDrive {
@@ -85,6 +87,8 @@ class SimulatedDrive {
   double velocity_mps() const { return velocity_mps_; }
   double applied_force_n() const { return applied_force_n_; }
   int16_t target_torque_permille() const { return target_torque_; }
+  uint16_t controlword() const { return controlword_; }      // last received 0x6040
+  uint32_t fault_resets() const { return fault_resets_; }    // CiA 402 transitions 15 taken
   uint32_t sync_count() const { return sync_count_; }
   uint32_t rpdo_count() const { return rpdo_count_; }
   uint32_t sdo_requests() const { return sdo_requests_; }
@@ -138,6 +142,7 @@ class SimulatedDrive {
   uint16_t prev_controlword_ = 0;
   int16_t target_torque_ = 0;
   bool fault_pending_ = false;
+  uint32_t fault_resets_ = 0;
   uint16_t pending_emcy_code_ = 0;
   bool emcy_pending_ = false;
   uint8_t emcy_reg_ = 0;

@@ -14,5 +14,6 @@ inline constexpr const char* kTargets = "MANIP_TARGETS";          // targets_t (
 inline constexpr const char* kDisplayHealth = "MANIP_DISPLAY_HEALTH";  // display_health_t (manipdisplay, ~1 Hz)
 inline constexpr const char* kTruthState = "MANIP_TRUTH_STATE";   // state_t of the unperturbed twin (simulators)
 inline constexpr const char* kTruthImpedance = "MANIP_TRUTH_IMPEDANCE";  // impedance_truth_t (simulators)
+inline constexpr const char* kCanRaw = "MANIP_CAN_RAW";           // can_frames_t (can backend, record_raw_frames: true)
 
 }  // namespace manip::channels

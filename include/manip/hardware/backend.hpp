@@ -18,8 +18,10 @@
 // disable() and shutdown() never throw and are idempotent; shutdown() runs on
 // every exit path (it disables first when Active). A call out of order is
 // refused with BackendStateError and changes nothing.
+#include <cstdint>
 #include <string>
 
+#include "manip/can_frames_t.hpp"
 #include "manip/common/errors.hpp"
 #include "manip/control/records.hpp"
 
@@ -35,6 +37,26 @@ struct BackendStateError : Error {
 // configure()/enable() failed (drive not found, bus down, bad parameters).
 struct BackendError : Error {
   explicit BackendError(const std::string& what) : Error(exit_code::kBackend, what) {}
+};
+
+// A backend's own account of a fault (e.g. the decoded CANopen reason), for
+// the session log. The loop only queues a fixed-size record; the text is
+// built here, on the logger thread.
+struct BackendFaultNote {
+  std::int64_t cycle{-1};   // loop cycle whose read() raised it (state_t.cycle); -1 = outside the loop
+  std::uint32_t status{0};  // backend_status bits it raised
+  std::string text;
+};
+
+// What the logger thread takes from a backend (never called by the loop).
+class BackendLogTap {
+ public:
+  virtual ~BackendLogTap() = default;
+  // The next fault note, oldest first; false if none.
+  virtual bool next_fault_note(BackendFaultNote& out) = 0;
+  // Raw bus traffic recorded since the last call, at most max_frames frames,
+  // as one message for channels::kCanRaw; false if nothing is waiting.
+  virtual bool next_raw_batch(manip::can_frames_t& /*out*/, std::size_t /*max_frames*/) { return false; }
 };
 
 class Backend {
@@ -58,6 +80,13 @@ class Backend {
   virtual void read(control::SensorReading& out) = 0;
   virtual void write(const control::ActuatorCommand& cmd) = 0;
   virtual void display(const control::DisplayCue& /*cue*/) {}
+  // The safety supervisor accepted the operator's FAULT_RESET in this cycle
+  // (runtime::RtCycle calls it, in the loop thread, before write()): the
+  // backend acknowledges its own latched faults (CAN: one rising edge of
+  // 0x6040 bit 7, then the drives are re-enabled). Real-time safe.
+  virtual void request_fault_reset() noexcept {}
+  // Non-real-time side for the logger thread; nullptr = nothing to log.
+  virtual BackendLogTap* log_tap() noexcept { return nullptr; }
 
  protected:
   virtual void on_configure() = 0;

@@ -30,6 +30,7 @@
 // simulated person of sim.human, the simulated force sensor, used whatever
 // backend.force_sensor says), driven by the
 // force each simulated drive applies from its CAN target torque.
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -38,7 +39,9 @@
 
 #include "manip/canopen/can_check.hpp"
 #include "manip/canopen/drive_set.hpp"
+#include "manip/canopen/frame_recorder.hpp"
 #include "manip/canopen/socketcan.hpp"
+#include "manip/canopen/spsc_ring.hpp"
 #include "manip/control/config.hpp"
 #include "manip/hardware/backend.hpp"
 #include "manip/hardware/force_sensor.hpp"
@@ -54,7 +57,24 @@ struct CanBackendOptions {
 // Reads and validates the CANopen file (ConfigError "file:line: key: reason").
 canopen::CanConfig load_can_config(const std::string& path);
 
-class CanBackend final : public Backend {
+// Operator fault reset (request_fault_reset(), called when the supervisor
+// accepts FAULT_RESET): what a lab expects from libfranka's
+// automaticErrorRecovery or ros2_canopen's `recover` service. A CANopen fault
+// the drives can recover from (CiA 402 Fault, a faulting EMCY, missing
+// TPDOs) raises its status bit in the detecting cycle only: the supervisor
+// latches it, and the master itself keeps the drives disabled at zero torque
+// until the reset, so the fault is "latched, acknowledgeable" rather than
+// "present". The reset sends one rising edge of 0x6040 bit 7 per drive in
+// Fault (CiA 402 transition 15 -> Switch on disabled), then re-enables the
+// drives through transitions 2, 3, 4 with zero target torque preloaded; the
+// session goes on in the supervisor's PAUSED mode (hold: admittance, no
+// trials) until the operator resumes. A drive still in Fault
+// master.fault_reset_timeout_ms after the edge, or not back in Operation enabled in time, raises
+// the fault again (with its reason). Faults that lose the drives'
+// configuration or the bus (heartbeat loss, reboot, bus-off, unexpected
+// node, refused sends) stay present: the reset is refused ("condition
+// present") and only a restart of manip_rt re-initialises the bus.
+class CanBackend final : public Backend, public BackendLogTap {
  public:
   // sensor: overrides the configured force source (tests); nullptr = from config.
   CanBackend(const control::ControlConfig& law, const SimConfig& sim, const canopen::CanConfig& can,
@@ -66,6 +86,17 @@ class CanBackend final : public Backend {
   void read(control::SensorReading& out) override;
   void write(const control::ActuatorCommand& cmd) override;
   void display(const control::DisplayCue& cue) override;
+  void request_fault_reset() noexcept override;
+  BackendLogTap* log_tap() noexcept override { return this; }
+  // BackendLogTap (logger thread): fault notes (the decoded CANopen reason,
+  // e-stop, sensor) and, with backend.record_raw_frames, the raw traffic.
+  bool next_fault_note(BackendFaultNote& out) override;
+  bool next_raw_batch(manip::can_frames_t& out, std::size_t max_frames) override;
+  // Frames lost because the raw-frame queue was full (0 when not recording).
+  [[nodiscard]] std::int64_t raw_frames_dropped() const { return recorder_ ? recorder_->dropped() : 0; }
+  [[nodiscard]] const canopen::FrameRecorder* recorder() const { return recorder_.get(); }
+  // Fault notes the loop could not queue (more than kNotes unread).
+  [[nodiscard]] std::int64_t fault_notes_dropped() const { return notes_dropped_.load(std::memory_order_relaxed); }
 
   // --can-virtual: called with the rig after it is built, before the SDO
   // start-up (tests inject start-up faults into the simulated drives here).
@@ -97,7 +128,23 @@ class CanBackend final : public Backend {
   void step_virtual_plant();
   [[noreturn]] void fail(const std::string& what, const canopen::Error& e);
 
-  enum class Latch : std::uint8_t { kNone, kCanopen, kEStop, kSensorStale };
+  enum class Latch : std::uint8_t { kNone, kCanopen, kEStop, kSensorStale, kEventStatus };
+  // A fault as the loop records it (plain value); formatted by describe().
+  struct Note {
+    std::int64_t cycle{-1};
+    std::uint32_t status{0};
+    Latch kind{Latch::kNone};
+    canopen::Error error{};
+    int axis{-1};
+    std::uint16_t statusword{0};
+    bool by_input{false};     // e-stop from 0x60FD (else statusword / voltage)
+    // kEventStatus: error.node and error.value = Copley's 0x1002 read at shutdown
+    std::uint32_t inputs{0};  // 0x60FD
+  };
+  static constexpr std::size_t kNotes = 32;
+  std::string describe(const Note& n) const;
+  void note(const Note& n) noexcept;
+  enum class Reset : std::uint8_t { kNone, kClearing, kEnabling };
 
   control::ControlConfig law_;
   SimConfig sim_;
@@ -127,7 +174,20 @@ class CanBackend final : public Backend {
   canopen::Error latched_error_{};
   int estop_axis_{-1};
   std::uint16_t estop_statusword_{0};
+  bool estop_by_input_{false};
+  std::uint32_t estop_inputs_{0};
   std::string budget_text_;
+  // operator fault reset and fault notes
+  std::int64_t loop_cycle_{-1};  // cycle of the current read() (-1 outside the loop)
+  bool fault_seen_{false};       // the current CANopen fault episode has raised its bit
+  bool estop_open_{false};       // chain open in the last read()
+  bool stale_{false};            // force sensor stale in the last read()
+  Reset reset_{Reset::kNone};
+  std::int64_t reset_deadline_us_{0};
+  std::uint32_t resets_failed_seen_{0};
+  canopen::SpscRing<Note> notes_{kNotes};
+  std::atomic<std::int64_t> notes_dropped_{0};
+  std::unique_ptr<canopen::FrameRecorder> recorder_;
 };
 
 }  // namespace manip::hardware

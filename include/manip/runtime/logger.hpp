@@ -16,6 +16,7 @@
 // once, and the remaining records are drained and discarded (counted).
 #include <atomic>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <mutex>
 #include <string>
@@ -27,6 +28,8 @@
 #include "manip/control/records.hpp"
 #include "manip/runtime/spsc_queue.hpp"
 #include "manip/fault_t.hpp"
+#include "manip/can_frames_t.hpp"
+#include "manip/hardware/backend.hpp"
 #include "manip/health_t.hpp"
 #include "manip/logging/event_log.hpp"
 #include "manip/session_t.hpp"
@@ -49,6 +52,10 @@ struct LoggerStats {
                                      // write failure, only those of the last successful flush
   std::int64_t fault_history_states{0};  // states written inside fault_t.history (each state at most once)
   std::int64_t faults_not_printed{0};    // fault lines on stderr suppressed by the rate limit
+  std::int64_t backend_notes{0};         // backend fault texts logged (merged into a fault record or on their own)
+  std::int64_t raw_frames{0};            // raw CAN frames written on MANIP_CAN_RAW
+  std::int64_t raw_batches{0};
+  std::int64_t raw_frames_dropped{0};    // lost in the backend's queue (can_frames_t.dropped_total)
 };
 
 class Logger {
@@ -75,6 +82,12 @@ class Logger {
   void set_fault_sink(std::function<void(const manip::fault_t&)> sink) { fault_sink_ = std::move(sink); }
   // Also print each fault record on stderr (the operator must see it).
   void set_print_faults(bool on) { print_faults_ = on; }
+  // The backend's non-real-time side (hardware::Backend::log_tap()): its
+  // fault texts go into the fault_t record the supervisor raised in the same
+  // cycle (reason + "; " + text), or into a fault_t of their own (n_history
+  // 0) when the supervisor raised none (already latched, or at shutdown);
+  // raw CAN frames go on MANIP_CAN_RAW in batches. nullptr = none.
+  void set_backend_tap(hardware::BackendLogTap* tap) { tap_ = tap; }
 
   // Process everything available now; returns the number of records handled.
   std::size_t drain();
@@ -99,6 +112,9 @@ class Logger {
   [[nodiscard]] std::int64_t events_on_disk() const;
   void publish_stats();
   void print_fault(const manip::fault_t& m, std::uint32_t flags);
+  void poll_notes();
+  void write_pending_notes(std::int64_t before_cycle);
+  void drain_raw();
 
   RecordQueue& q_;
   AuxQueue* aux_{nullptr};
@@ -124,6 +140,10 @@ class Logger {
   LoggerStats stats_{};      // logger thread only
   LoggerStats published_{};  // copy for other threads
   std::int64_t last_utime_{0};
+  hardware::BackendLogTap* tap_{nullptr};
+  std::deque<hardware::BackendFaultNote> notes_;
+  std::uint32_t last_fault_flags_{0};  // of the newest state handled
+  manip::can_frames_t raw_{};
 };
 
 }  // namespace manip::runtime

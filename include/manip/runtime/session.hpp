@@ -31,7 +31,15 @@ class RtCycle final : public CycleBody {
   RtCycle(hardware::Backend& b, control::Controller& c) : b_(b), c_(c) {}
   bool run_cycle(std::int64_t cycle, bool overran) override {
     b_.read(reading_);
+    const control::Mode before = c_.mode();
     const control::ActuatorCommand& cmd = c_.step(reading_, cycle, overran);
+    // FAULT/ESTOP -> IDLE/PAUSED happens only when the supervisor accepts
+    // the operator's FAULT_RESET (SafetyStateMachine::fault_reset): the
+    // backend then acknowledges its own latched faults.
+    const control::Mode after = c_.mode();
+    if ((before == control::Mode::kFault || before == control::Mode::kEStop) &&
+        (after == control::Mode::kIdle || after == control::Mode::kPaused))
+      b_.request_fault_reset();
     if (cmd.send) b_.write(cmd);
     b_.display(cmd.cue);
     return !c_.finished();
