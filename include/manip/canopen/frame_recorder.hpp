@@ -8,7 +8,7 @@
 #include <cstdint>
 
 #include "manip/canopen/frame.hpp"
-#include "manip/canopen/spsc_ring.hpp"
+#include "manip/common/spsc_queue.hpp"
 
 namespace manip::canopen {
 
@@ -41,7 +41,7 @@ class FrameRecorder {
   [[nodiscard]] std::size_t size_approx() const { return ring_.size_approx(); }
 
  private:
-  SpscRing<RecordedFrame> ring_;
+  SpscQueue<RecordedFrame> ring_;
   int64_t cycle_ = -1;
   std::atomic<int64_t> dropped_{0};
 };

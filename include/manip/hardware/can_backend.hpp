@@ -41,7 +41,7 @@
 #include "manip/canopen/drive_set.hpp"
 #include "manip/canopen/frame_recorder.hpp"
 #include "manip/canopen/socketcan.hpp"
-#include "manip/canopen/spsc_ring.hpp"
+#include "manip/common/spsc_queue.hpp"
 #include "manip/control/config.hpp"
 #include "manip/hardware/backend.hpp"
 #include "manip/hardware/force_sensor.hpp"
@@ -185,7 +185,7 @@ class CanBackend final : public Backend, public BackendLogTap {
   Reset reset_{Reset::kNone};
   std::int64_t reset_deadline_us_{0};
   std::uint32_t resets_failed_seen_{0};
-  canopen::SpscRing<Note> notes_{kNotes};
+  SpscQueue<Note> notes_{kNotes};
   std::atomic<std::int64_t> notes_dropped_{0};
   std::unique_ptr<canopen::FrameRecorder> recorder_;
 };
