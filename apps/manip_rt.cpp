@@ -185,7 +185,8 @@ int run(int argc, char** argv) {
               << " movements (" << cfg.perturbed_count() << " perturbed), log " << log << "\n";
   const rt::RunReport rep = rt::run_session(cfg, *hw_backend, opt, std::cerr);
   if (rep.cycles > 0 && (!quiet || rep.exit_code != 0)) std::cerr << rep.summary();
-  std::cerr << "manip_rt: " << rep.message << " (exit " << rep.exit_code << ")\n";
+  // -q: silent on success (docs/cli.md); how a session ended otherwise is always said.
+  if (!quiet || rep.exit_code != ec::kOk) std::cerr << "manip_rt: " << rep.message << " (exit " << rep.exit_code << ")\n";
   return rep.exit_code;
 }
 
