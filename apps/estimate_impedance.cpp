@@ -1,13 +1,12 @@
 // estimate_impedance: involuntary impedance (D, K) of the arm from manip LCM
 // logs (paper §3, Table 1). Thin main: options -> estimation library -> outputs.
-#include <CLI/CLI.hpp>
-
 #include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <random>
 
+#include "manip/common/cli.hpp"
 #include "manip/common/errors.hpp"
 #include "manip/common/exit_codes.hpp"
 #include "manip/common/output_file.hpp"
@@ -20,21 +19,22 @@ namespace {
 namespace ec = manip::exit_code;
 namespace fs = std::filesystem;
 
-std::string exit_code_help() {
-  std::string t = "Exit codes (common/exit_codes.hpp, docs/exit-codes.md):\n";
-  for (const auto& [code, what] : std::initializer_list<std::pair<int, const char*>>{
-           {ec::kOk, "every log estimated, nothing excluded or flagged"},
-           {ec::kPartial, "estimated, but trials were excluded, a session fit is flagged not identifiable, or a figure could not be drawn"},
-           {ec::kUsage, "bad command line (unknown option, value not a number or out of range): nothing read"},
-           {ec::kConfig, "settings file (--config) invalid or unreadable"},
-           {ec::kInput, "a log unusable (missing, not LCM, no/invalid session message, no MANIP_STATE, unknown schema); other logs still processed"},
-           {ec::kNothing, "no usable perturbed trial in any readable log"},
-           {ec::kOutput, "an output (--json, --csv, --plots, --report, --export-signals) cannot be written: exists without --force, "
-                         "unwritable, or Python/matplotlib missing for --plots/--report"},
-           {ec::kInternal, "internal error (a bug: please report it)"}})
-    t += "  " + std::to_string(code) + "  " + what + "\n";
-  return t;
-}
+// The rows of the one table (common/exit_codes.hpp) estimate_impedance returns;
+// what each means here is in kExitNotes.
+const std::vector<int> kExitCodes = {ec::kOk,      ec::kPartial, ec::kUsage,  ec::kConfig,
+                                     ec::kInput,   ec::kNothing, ec::kOutput, ec::kInternal};
+const char* kExitNotes =
+    "What the codes mean for estimate_impedance (several: the most severe wins, docs/exit-codes.md):\n"
+    "    0: every log estimated, nothing excluded or flagged\n"
+    "    1: estimated, but trials were excluded, a session fit is flagged not identifiable, or a figure\n"
+    "       could not be drawn\n"
+    "    2: bad command line (unknown option, value not a number or out of range): nothing read\n"
+    "    3: settings file (--config) invalid, unreadable or not found\n"
+    "    4: a log unusable (missing, not LCM, no/invalid session message, no MANIP_STATE, unknown schema);\n"
+    "       other logs still processed\n"
+    "    5: no usable perturbed trial in any readable log\n"
+    "    6: an output (--json, --csv, --plots, --report, --export-signals) cannot be written: exists\n"
+    "       without --force, unwritable, or Python/matplotlib missing for --plots/--report\n";
 
 std::string method_help() {
   std::string t = "Methods (--method; 'all' runs every one):\n";
@@ -103,17 +103,22 @@ struct TempDir {
 
 int run(int argc, char** argv) {
   using namespace manip::estimation;
+  namespace cli = manip::cli;
   CLI::App app{"estimate_impedance " + std::string(manip::kVersion) +
-               ": involuntary impedance (damping D, stiffness K) from manip session logs."};
-  app.footer(method_help() + exit_code_help());
+                   ": involuntary impedance (damping D, stiffness K) from manip session logs.",
+               "estimate_impedance"};
+  app.footer(method_help() + "\n" + kExitNotes);
   std::vector<std::string> logs;
-  std::string method = default_method(), cutoff = "1", config, json_path, csv_path, signals_dir, plots_dir, report_path,
+  std::string method = default_method(), cutoff = "1", json_path, csv_path, signals_dir, plots_dir, report_path,
               group_csv_path;
   // Numbers are read as text and parsed here, so a bad value is refused with
   // the option named and its range (not CLI11's or std::stod's wording).
   std::string t_est, cutoff_thr, oe_pre, sg_window, oe_poly;
   std::string k_model, force_source;
-  bool estimate_m = false, no_jackknife = false, quiet = false, force = false, group = false;
+  bool estimate_m = false, no_jackknife = false, group = false;
+  cli::Common c;
+  cli::add_version(app, "estimate_impedance");
+  cli::add_quiet(app, c.quiet);
   app.add_option("logs", logs, "LCM log files (one session each)")->required();
   app.add_option("--method", method, method_list() + " | all (default " + default_method() + ", listed below)");
   app.add_option("--cutoff", cutoff, "high-pass cut-off in Hz, (0, 100], or 'auto' from the jerk PSDs (default 1, paper §4.3)");
@@ -126,7 +131,8 @@ int run(int argc, char** argv) {
   app.add_option("--oe-pre", oe_pre, "output error: data before onset, [0, 0.5] s (default 0.05)");
   app.add_option("--oe-poly-order", oe_poly, "output error: per-trial polynomial order, [0, 8] (default 3)");
   app.add_flag("--no-jackknife", no_jackknife, "output error: least-squares SE instead of the jackknife over trials");
-  app.add_option("--config", config, "estimator settings YAML (config/estimator.yaml); flags override it");
+  cli::add_config(app, c.config, "estimator.yaml",
+                  "estimator settings YAML, read only when given (else built-in defaults); flags override it");
   app.add_option("--json", json_path, "write results as JSON (layout: docs/estimator.md)");
   app.add_option("--csv", csv_path, "write results as CSV, tidy long form (docs/estimator.md)");
   app.add_option("--export-signals", signals_dir, "write per-trial Δ signals as CSV into DIR");
@@ -134,15 +140,12 @@ int run(int argc, char** argv) {
   app.add_option("--report", report_path, "write the HTML session report (python -m manipplot.report; one page, group table first for several logs)");
   app.add_flag("--group", group, "group table (Table 1: mean (std) over participants); always on with several logs");
   app.add_option("--group-csv", group_csv_path, "write the group table as CSV, tidy long form");
-  app.add_flag("--force", force, "overwrite existing output files");
-  app.add_flag("-q,--quiet", quiet, "no progress on stderr");
-  app.set_version_flag("--version", std::string(manip::kVersion));
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    const int rc = app.exit(e);
-    return rc == 0 ? ec::kOk : ec::kUsage;
-  }
+  cli::add_force(app, c.force);
+  cli::set_exit_codes(app, kExitCodes);
+  if (const auto rc = cli::parse(app, argc, argv)) return *rc;
+  const bool quiet = c.quiet, force = c.force;
+  // A bare name (--config lab.yaml) is searched like every program's config (docs/cli.md).
+  const std::string config = c.config.empty() ? std::string() : cli::find_config(c.config, "estimator.yaml");
 
   // Every option is checked before any log is read.
   EstimatorSettings s;

@@ -142,7 +142,7 @@ int run(int argc, char** argv) {
               << sum.onsets << " onsets), " << sum.cycles << " cycles; mean max deviation in [0, "
               << d.t_est_s * 1000 << "] ms: x1 " << mean(sum.max_dev_x1_m) * 1000 << " mm, x2 "
               << mean(sum.max_dev_x2_m) * 1000 << " mm\n";
-    if (sum.apparent) {  // the session's apparent (involuntary) impedance truth, sim/truth.hpp
+    if (sum.apparent && !c.quiet) {  // the session's apparent (involuntary) impedance truth, sim/truth.hpp
       const auto& ap = *sum.apparent;
       std::cerr << "manip_sim: apparent truth (intrinsic + feedback within " << d.t_est_s * 1000 << " ms): D [" << ap.d_nspm(0, 0)
                 << " " << ap.d_nspm(0, 1) << "; " << ap.d_nspm(1, 0) << " " << ap.d_nspm(1, 1) << "] N s/m, K ["

@@ -126,7 +126,7 @@ manip_can_check --config /etc/wrongid.yml --periods 400 > /tmp/cc.log 2>&1; echo
 sed 's/^/CANCHECK wrongid: /' /tmp/cc.log | grep -E "FAIL|unexpected" | tail -2
 # manip_rt --backend can, paced (SCHED_FIFO in the guest), 2 s of loop time.
 manip_rt --backend can --can-config /etc/rt_can.yml --config /etc/rt.yaml --realtime --duration 2 \
-  --log /tmp/rt.lcm --lcm-url none > /tmp/rt.log 2>&1; echo "MANIP_RT rc=\$?"
+  --out /tmp/rt.lcm --lcm-url none > /tmp/rt.log 2>&1; echo "MANIP_RT rc=\$?"
 sed 's/^/MANIP_RT: /' /tmp/rt.log | grep -vE "^MANIP_RT:   +(frame|SYNC|RPDO|TPDO|heartbeat|EMCY|cyclic|total)|^MANIP_RT: bus " | tail -14
 tail -2 /tmp/d1.log /tmp/d2.log
 poweroff -f

@@ -116,6 +116,7 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& t, const P
 Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std::string> warnings) {
   Report rep;
   rep.info = info_;
+  rep.truth.apparent = apparent_;
   rep.settings = s_;
   rep.issues = std::move(issues);
   rep.warnings = std::move(warnings);
@@ -414,6 +415,7 @@ Report estimate_log(const std::string& path, const EstimatorSettings& s) {
   queue.close();
   worker.join();
   if (worker_error) std::rethrow_exception(worker_error);
+  if (asmb.apparent_truth()) est.set_apparent_truth(*asmb.apparent_truth());
   if (asmb.states_seen() == 0) {
     // A recording of the live bus (lcm-logger) holds the decimated
     // MANIP_STATE_LIVE only: say so instead of "no usable trial" (issue 13).
@@ -427,7 +429,11 @@ Report estimate_log(const std::string& path, const EstimatorSettings& s) {
     }
   }
   if (!asmb.has_session()) throw manip::InputError(path + ": no session message (MANIP_SESSION) in the log");
-  return est.finish(asmb.issues(), asmb.warnings());
+  Report rep = est.finish(asmb.issues(), asmb.warnings());
+  // No trial reached the estimator (a log shorter than one trial): the session
+  // is still the log's, not empty fields (issue 13).
+  if (!have_info) rep.info = asmb.session();
+  return rep;
 }
 
 }  // namespace manip::estimation

@@ -168,6 +168,30 @@ void TrialAssembler::do_truth_state(const manip::state_t& s) {
 }
 
 void TrialAssembler::do_truth_impedance(const manip::impedance_truth_t& t) {
+  // trial -1: a truth of the whole session, not of a trial (written inside
+  // the last perturbed trial, before its END: never attached to that trial).
+  if (t.trial == -1) {
+    auto finite4 = [](const double a[4]) {
+      return std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]) && std::isfinite(a[3]);
+    };
+    if (t.model != kApparentTruthModel) {
+      warnings_.push_back("session-level truth (MANIP_TRUTH_IMPEDANCE, trial -1) of unknown model '" + t.model +
+                          "' ignored");
+    } else if (!finite4(t.m_kg) || !finite4(t.d_nspm) || !finite4(t.k_npm) || !std::isfinite(t.t_est_s)) {
+      warnings_.push_back("apparent truth (MANIP_TRUTH_IMPEDANCE, trial -1) with non-finite values ignored");
+    } else if (apparent_) {
+      warnings_.push_back("second apparent truth (MANIP_TRUTH_IMPEDANCE, trial -1) ignored");
+    } else {
+      ApparentTruth a;
+      a.m_kg << t.m_kg[0], t.m_kg[1], t.m_kg[2], t.m_kg[3];
+      a.d_nspm << t.d_nspm[0], t.d_nspm[1], t.d_nspm[2], t.d_nspm[3];
+      a.k_npm << t.k_npm[0], t.k_npm[1], t.k_npm[2], t.k_npm[3];
+      a.t_est_s = t.t_est_s;
+      a.model = t.model;
+      apparent_ = a;
+    }
+    return;
+  }
   if (!in_trial_ || t.trial != cur_.trial) return;
   cur_.has_truth = true;
   cur_.truth_m_kg << t.m_kg[0], t.m_kg[1], t.m_kg[2], t.m_kg[3];

@@ -216,9 +216,6 @@ def main():
                                            "--snapshot-dir", snaps, "--stats-json", stats_path],
                             env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     check(pump(30, lambda: len(got["health"]) > 0), "display publishes MANIP_DISPLAY_HEALTH")
-    help_text = subprocess.run([RT, "--help"], capture_output=True, text=True).stdout
-    n_flag = "--movements" if "--movements" in help_text else "--trials"
-    log_flag = "--log" if "--log" in help_text else "--out"
     # The machine running CI is shared: a paced loop misses deadlines there and
     # the default overrun policy latches a fault. The overrun safety is not what
     # this test checks, so it is relaxed in a copy of the default configuration.
@@ -231,7 +228,7 @@ def main():
         text = text.replace(lines[0], lines[0].split(":")[0] + ": " + value)
     with open(rt_cfg, "w") as f:
         f.write(text)
-    rt = subprocess.Popen([RT, "--backend", "sim", "--realtime", "--config", rt_cfg, n_flag, "3", log_flag, log_path,
+    rt = subprocess.Popen([RT, "--backend", "sim", "--realtime", "--config", rt_cfg, "--movements", "3", "--out", log_path,
                            "--quiet"], cwd=SRC, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
     snap_meta = []  # (label, expected targets source)

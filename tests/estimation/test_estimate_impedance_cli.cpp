@@ -42,7 +42,8 @@ TEST_CASE("estimate_impedance: exit codes of the executable", "[cli]") {
   std::string out;
   CHECK(run("--help", &out) == ec::kOk);
   CHECK(out.find("Exit codes") != std::string::npos);
-  CHECK(out.find("  5  no usable perturbed trial") != std::string::npos);
+  CHECK(out.find("    5 nothing to compute") != std::string::npos);
+  CHECK(out.find("5: no usable perturbed trial") != std::string::npos);
   CHECK(out.find("[default, recommended]") != std::string::npos);  // the method list comes from the registry
 
   CHECK(run(good + " -q --method paper-pooled", &out) <= ec::kPartial);
@@ -60,4 +61,35 @@ TEST_CASE("estimate_impedance: exit codes of the executable", "[cli]") {
   CHECK(run(dir + "/bad_session.lcm " + good + " -q --method paper-pooled", &out) == ec::kInput);
   CHECK(out.find("paper-pooled: pooled fit") != std::string::npos);
   CHECK(run(good + " -q --method paper-pooled --json " + dir + "/no/such/dir/out.json", &out) == ec::kOutput);
+}
+
+TEST_CASE("estimate_impedance: --version, -q, --config searched like every program's (docs/cli.md)", "[cli]") {
+  if (!std::filesystem::exists(kApp)) {
+    WARN("estimate_impedance not built: skipped (ninja estimate_impedance)");
+    return;
+  }
+  namespace ec = manip::exit_code;
+  const auto dir = testutil::temp_dir("estimate_cli_common");
+  const std::string good = dir + "/good.lcm";
+  testutil::write_recorded(testutil::record(testutil::small_design(10), sim::table1_person()), good);
+  std::filesystem::create_directories(dir + "/home");
+  std::filesystem::create_directories(dir + "/lab");
+  std::ofstream(dir + "/lab/mine.yaml") << "hp_ordr: 4\n";  // invalid: proves it is the file read
+  const std::string env = "cd " + dir + " && env -u MANIP_CONFIG_DIR -u XDG_CONFIG_HOME HOME=" + dir + "/home ";
+  std::string out;
+  CHECK(testutil::run_command(kApp + " --version", &out) == ec::kOk);
+  CHECK(out.rfind("estimate_impedance ", 0) == 0);
+  // A bare name: $MANIP_CONFIG_DIR first (here the invalid file: exit 3 naming it).
+  CHECK(testutil::run_command(env + "MANIP_CONFIG_DIR=" + dir + "/lab " + kApp + " good.lcm -q --config mine.yaml", &out) ==
+        ec::kConfig);
+  CHECK(out.find(dir + "/lab/mine.yaml:1: hp_ordr: unknown key") != std::string::npos);
+  // The packaged default by name, from a directory without config/ (build tree: the source config/).
+  CHECK(testutil::run_command(env + kApp + " good.lcm -q --method pem --config estimator.yaml", &out) <= ec::kPartial);
+  // Nowhere: exit 3 naming every directory searched; nothing else read.
+  CHECK(testutil::run_command(env + kApp + " good.lcm -q --config nosuch.yaml", &out) == ec::kConfig);
+  CHECK(out.find("nosuch.yaml: configuration file not found (searched: ./, " + dir + "/home/.config/manip") !=
+        std::string::npos);
+  // -q: nothing on stderr on success (stdout carries the result).
+  CHECK(testutil::run_command("(" + env + kApp + " good.lcm -q --method pem 2>&1 >/dev/null)", &out) == ec::kOk);
+  CHECK(out.empty());
 }

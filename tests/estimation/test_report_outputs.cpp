@@ -147,7 +147,7 @@ TEST_CASE("text tables never fuse: widths from the data, scientific notation for
   const std::string text = format_text(r, "mem");
   CHECK(text.find("pem (default, recommended)") != std::string::npos);
   CHECK(text.find("paper-pooled (BIASED)") != std::string::npos);
-  CHECK(text.find("error vs truth") != std::string::npos);
+  CHECK(text.find("error vs intrinsic truth") != std::string::npos);
   CHECK(std::regex_search(text, std::regex("method +D11 +D12 +D21 +D22 +K11 +K12 +K21 +K22")));  // labelled errors
 }
 

@@ -371,12 +371,12 @@ TEST_CASE("manip_rt --backend can --can-virtual completes a protocol that estima
   const std::string dir = std::filesystem::temp_directory_path().string();
   const std::string log_can = dir + "/manip_can_session_" + std::to_string(::getpid()) + ".lcm";
   const std::string log_sim = dir + "/manip_sim_session_" + std::to_string(::getpid()) + ".lcm";
-  const std::string common = " --trials 12 --afap --lcm-url none --quiet --force --exit-on-fault";
+  const std::string common = " --movements 12 --afap --lcm-url none --quiet --force --exit-on-fault";
   std::string out;
-  const int rc_can = run_app("--backend can --can-virtual" + common + " --log " + log_can, out);
+  const int rc_can = run_app("--backend can --can-virtual" + common + " --out " + log_can, out);
   INFO(out);
   REQUIRE(rc_can == 0);
-  const int rc_sim = run_app("--backend sim" + common + " --log " + log_sim, out);
+  const int rc_sim = run_app("--backend sim" + common + " --out " + log_sim, out);
   REQUIRE(rc_sim == 0);
   namespace est = manip::estimation;
   est::EstimatorSettings es;

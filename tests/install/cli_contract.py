@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The CLI contract of one app (docs/cli.md), checked from outside.
 
-    cli_contract.py SOURCE_DIR APP_BINARY [--returns | --help-only]
+    cli_contract.py SOURCE_DIR APP_BINARY [--returns [--sim MANIP_SIM]] [--help-only]
 
 * `--help` exits 0 and prints "Exit codes (docs/exit-codes.md):" followed by
   rows "  <code> <name>" whose names equal common/exit_codes' names for those
@@ -12,10 +12,15 @@
 * `--help-only` (apps not yet on common/cli.hpp): `--help` exits 0 and every
   "N  text" row it prints uses a code of the one table.
 * `--returns`: each documented code other than 70 (a bug) is produced by a
-  known bad (or good) invocation, so the table and the behaviour agree.
+  known bad (or good) invocation, so the table and the behaviour agree; a
+  code that cannot be produced on this machine (9 on a PREEMPT_RT kernel) is
+  named as skipped. The exit-0 case runs with -q and must print nothing on
+  stderr (docs/cli.md: only warnings and errors). `--sim` gives manip_sim,
+  which writes the logs estimate_impedance's cases read.
 """
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -36,8 +41,24 @@ def project_version(src):
     return m.group(1)
 
 
-def run(cmd, cwd):
-    return subprocess.run(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=300)
+def run(cmd, cwd, interrupt_after=None):
+    """Runs cmd; with interrupt_after, sends SIGINT that many seconds after the start."""
+    if interrupt_after is None:
+        return subprocess.run(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=300)
+    p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        p.communicate(timeout=interrupt_after)
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    return subprocess.CompletedProcess(cmd, p.returncode, out, err)
+
+
+def preempt_rt():
+    try:
+        return open("/sys/kernel/realtime").read().strip() == "1"
+    except OSError:
+        return False
 
 
 def printed_table(help_text):
@@ -55,8 +76,9 @@ def printed_table(help_text):
     return rows
 
 
-def returns_cases(app, src, tmp):
-    """code -> argv producing it (run in tmp). Only codes an app documents are used."""
+def returns_cases(app, src, tmp, sim=None):
+    """code -> argv producing it (run in tmp), or ("SIGINT", seconds, argv), or ("SKIP", reason).
+    Only codes an app documents are used."""
     bus = os.path.join(src, "tests/canopen/bus.yml")
     bad_yaml = os.path.join(tmp, "bad.yaml")
     with open(bad_yaml, "w") as f:
@@ -64,6 +86,34 @@ def returns_cases(app, src, tmp):
     existing = os.path.join(tmp, "existing.out")
     with open(existing, "w") as f:
         f.write("keep\n")
+    # manip_rt: a configuration whose velocity limit a normal reach exceeds (safety fault).
+    slow_yaml = os.path.join(tmp, "slow_rt.yaml")
+    rt_yaml = open(os.path.join(src, "config", "rt.yaml")).read()
+    rt_yaml, n = re.subn(r"max_velocity_mps: *[0-9.]+", "max_velocity_mps: 0.02", rt_yaml)
+    assert n == 1, "config/rt.yaml has no max_velocity_mps"
+    with open(slow_yaml, "w") as f:
+        f.write(rt_yaml)
+    rt_log = lambda name: ["--out", os.path.join(tmp, name)]
+    # estimate_impedance: logs written by manip_sim (--sim).
+    est = {}
+    if app == "estimate_impedance" and sim:
+        good, none_perturbed = os.path.join(tmp, "good.lcm"), os.path.join(tmp, "unperturbed.lcm")
+        subprocess.run([sim, "--movements", "10", "--reps", "1", "--seed", "3", "-q", "--out", good], check=True)
+        subprocess.run([sim, "--movements", "3", "--reps", "0", "-q", "--out", none_perturbed], check=True)
+        # Cut inside the last trial: that trial is excluded, the rest estimated (partial).
+        cut = os.path.join(tmp, "cut.lcm")
+        data = open(good, "rb").read()
+        with open(cut, "wb") as f:
+            f.write(data[:len(data) * 95 // 100])
+        est = {
+            0: [good, "-q"],
+            1: [cut, "-q"],
+            2: [good, "--t-est", "nan"],
+            3: [good, "--config", bad_yaml],
+            4: [os.path.join(tmp, "missing.lcm")],
+            5: [none_perturbed],
+            6: [good, "--json", existing],
+        }
     cases = {
         "manip_sim": {
             0: ["--out", os.path.join(tmp, "s.lcm"), "--movements", "10", "--reps", "1", "-q"],
@@ -83,6 +133,21 @@ def returns_cases(app, src, tmp):
             3: ["--config", os.path.join(tmp, "missing.yml"), "--virtual"],
             8: ["--config", bus, "--virtual", "--virtual-fault", "never-boot", "--periods", "200"],
         },
+        "manip_rt": {
+            0: ["--movements", "1", "--lcm-url", "none", "-q"] + rt_log("rt.lcm"),
+            2: ["--movements", "0"] + rt_log("never.lcm"),
+            3: ["--config", bad_yaml] + rt_log("never.lcm"),
+            6: ["--movements", "1", "--lcm-url", "none", "--out", existing],
+            7: ["--config", slow_yaml, "--movements", "1", "--lcm-url", "none"] + rt_log("fault.lcm"),
+            # The default can.yaml names can0: absent (or no AF_CAN at all) on a CI machine.
+            8: ["--backend", "can", "--lcm-url", "none"] + rt_log("can.lcm"),
+            9: ("SKIP", "this kernel is PREEMPT_RT: --require-rt may succeed") if preempt_rt() else
+               ["--realtime", "--require-rt", "--duration", "0.1", "--lcm-url", "none"] + rt_log("never.lcm"),
+            10: ["--realtime", "--duration", "1", "--lcm-url", "nosuch://x"] + rt_log("bus.lcm"),
+            # As fast as possible (no overrun fault on a loaded machine); a whole session takes far longer than 1 s.
+            130: ("SIGINT", 1.0, ["--afap", "--lcm-url", "none", "--force"] + rt_log("int.lcm")),
+        },
+        "estimate_impedance": est,
         "manip_fake_drive": {
             2: ["--mass-kg", "inf"],
             # No such interface (on this kernel possibly no AF_CAN at all): the backend is unavailable.
@@ -132,18 +197,29 @@ def main():
         if v.returncode != 0 or v.stdout.strip() != want:
             failures.append("--version: exit %d, printed %r (want %r)" % (v.returncode, v.stdout.strip(), want))
         if check_returns:
-            cases = returns_cases(app, src, tmp)
+            sim = sys.argv[sys.argv.index("--sim") + 1] if "--sim" in sys.argv else None
+            cases = returns_cases(app, src, tmp, sim)
             if not cases:
                 failures.append("no return-code cases known for %s" % app)
-            for code, args in sorted(cases.items()):
+            for code, case in sorted(cases.items()):
                 if code not in rows:
                     failures.append("case for code %d, which --help does not document" % code)
-                r = run([binary] + args, tmp)
+                interrupt = None
+                if isinstance(case, tuple) and case[0] == "SKIP":
+                    print("SKIP %s: code %d: %s" % (app, code, case[1]))
+                    continue
+                if isinstance(case, tuple) and case[0] == "SIGINT":
+                    interrupt, args = case[1], case[2]
+                else:
+                    args = case
+                r = run([binary] + args, tmp, interrupt)
                 if r.returncode != code:
                     failures.append("%s -> exit %d, want %d (%s); stderr: %s" % (
                         " ".join(args), r.returncode, code, ref.get(code), r.stderr.strip()[-300:]))
                 elif code != 0 and not (r.stderr.strip() or r.stdout.strip()):
                     failures.append("%s -> exit %d without a message" % (" ".join(args), code))
+                elif code == 0 and ("-q" in args or "--quiet" in args) and r.stderr.strip():
+                    failures.append("%s -> exit 0 but -q printed on stderr: %s" % (" ".join(args), r.stderr.strip()[-300:]))
             undocumented = sorted(set(rows) - set(cases) - {0, 70})
             if undocumented:
                 failures.append("documented codes without a case: %s" % undocumented)

@@ -5,8 +5,11 @@
 # installed tools from another directory with a clean environment:
 #   manip_sim --human neuromech finds arm_model.yaml through the search path
 #   (<prefix>/share/manip/config; not the source tree), estimate_impedance
-#   estimates the session, Debian's python3 imports manipplot and the
-#   generated types from <prefix>/lib/python3/dist-packages.
+#   estimates the session, manip_rt finds rt.yaml the same way and records a
+#   session, Debian's python3 imports manipplot and the generated types from
+#   <prefix>/lib/python3/dist-packages. The package carries a machine-readable
+#   /usr/share/doc/manip/copyright (Debian policy 12.5); lintian, when
+#   installed, is run and its findings printed (only a missing copyright fails).
 # Usage: deb_install.sh BUILD_DIR
 set -eu
 build=$(cd "$1" && pwd)
@@ -33,9 +36,24 @@ dpkg -x "$deb" "$root"
 for f in usr/bin/manip_sim usr/bin/estimate_impedance usr/bin/manip_rt usr/share/manip/config/rt.yaml \
          usr/share/manip/config/arm_model.yaml usr/share/manip/lcmtypes/state_t.lcm \
          usr/lib/python3/dist-packages/manipplot/__init__.py usr/lib/python3/dist-packages/manip/state_t.py \
-         usr/share/doc/manip/exit-codes.md; do
+         usr/share/doc/manip/exit-codes.md usr/share/doc/manip/copyright; do
   [ -e "$root/$f" ] || { echo "FAIL: package lacks /$f"; exit 1; }
 done
+# copyright-format 1.0: the Format line, a Files paragraph with Copyright and License.
+cr="$root/usr/share/doc/manip/copyright"
+for field in '^Format: https://www.debian.org/doc/packaging-manuals/copyright-format/1.0/' '^Upstream-Name: manip' \
+             '^Files: \*' '^Copyright: ' '^License: '; do
+  grep -q "$field" "$cr" || { echo "FAIL: /usr/share/doc/manip/copyright lacks '$field'"; exit 1; }
+done
+echo "copyright: $(grep '^License: ' "$cr" | head -1)"
+if command -v lintian > /dev/null 2>&1; then
+  lintian --no-tag-display-limit "$deb" > "$work/lintian.txt" 2>&1 || true
+  echo "lintian ($(lintian --version)): $(grep -c '^[EW]: ' "$work/lintian.txt") errors/warnings"
+  sed 's/^/  /' "$work/lintian.txt"
+  if grep -q 'no-copyright-file' "$work/lintian.txt"; then echo "FAIL: lintian: no-copyright-file"; exit 1; fi
+else
+  echo "lintian: not installed (optional: apt-get install lintian)"
+fi
 if grep -q '^MANIP_JAVA:BOOL=ON' "$build/CMakeCache.txt"; then
   [ -e "$root/usr/share/java/manip_lcmtypes.jar" ] || { echo "FAIL: package lacks the jar"; exit 1; }
 fi
@@ -53,6 +71,15 @@ rc=${rc:-0}
 [ "$rc" -le 1 ] || { echo "FAIL: estimate_impedance exit $rc"; cat est.err; exit 1; }
 [ -s est.json ] || { echo "FAIL: no estimate written"; exit 1; }
 head -5 est.txt
+# manip_rt: rt.yaml from the package's share/manip/config, found from here (no config/ in this directory).
+run manip_rt --version
+run manip_rt --movements 2 --lcm-url none --out rt.lcm 2> rt.err || { echo "FAIL: manip_rt exit $?"; cat rt.err; exit 1; }
+grep -q "config $root/usr/share/manip/config/rt.yaml" rt.err || { echo "FAIL: manip_rt did not use the packaged rt.yaml"; cat rt.err; exit 1; }
+[ -s rt.lcm ] || { echo "FAIL: manip_rt wrote no log"; exit 1; }
+rc=0
+run estimate_impedance rt.lcm -q > rt_est.txt 2>&1 || rc=$?
+grep -q "session sim-session-001" rt_est.txt || { echo "FAIL: estimate_impedance on manip_rt's log (exit $rc)"; cat rt_est.txt; exit 1; }
+echo "manip_rt: $(head -1 rt.err | cut -c1-160)"
 run /usr/bin/python3 -c "
 import sys
 sys.path.insert(0, '$root/usr/lib/python3/dist-packages')

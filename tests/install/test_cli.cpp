@@ -5,6 +5,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
+#include <sstream>
 #include <string>
 
 #include "fixtures.hpp"
@@ -125,4 +127,45 @@ TEST_CASE("cli: exit-code rows come from the one table") {
   CHECK(app.get_footer().find("0 ok") != std::string::npos);
   CHECK(parse(app, {"--version"}) == ec::kOk);
   CHECK(parse(app, {"--no-such-flag"}) == ec::kUsage);
+}
+
+TEST_CASE("cli: a deprecated alias sets the same value, says what replaces it, and is refused with its replacement") {
+  namespace ec = manip::exit_code;
+  std::ostringstream err;
+  auto* old_buf = std::cerr.rdbuf(err.rdbuf());
+  struct Restore {
+    std::streambuf* b;
+    ~Restore() { std::cerr.rdbuf(b); }
+  } restore{old_buf};
+  {
+    CLI::App app{"t", "prog"};
+    std::string out;
+    int n = 0;
+    cli::add_out(app, out, "log");
+    app.add_option("--movements", n)->check(CLI::Range(1, 10));
+    cli::add_deprecated_alias(app, "--log", "--out", out);
+    cli::add_deprecated_alias(app, "--trials", "--movements", n)->check(CLI::Range(1, 10));
+    CHECK(parse(app, {"--log", "a.lcm", "--trials", "3"}) == -1);
+    CHECK(out == "a.lcm");
+    CHECK(n == 3);
+    CHECK(err.str() == "prog: --log is deprecated; use --out\nprog: --trials is deprecated; use --movements\n");
+  }
+  err.str("");
+  {
+    CLI::App app{"t", "prog"};
+    std::string out;
+    cli::add_out(app, out, "log");
+    cli::add_deprecated_alias(app, "--log", "--out", out);
+    CHECK(parse(app, {"--out", "a.lcm", "--log", "b.lcm"}) == ec::kUsage);
+  }
+  {
+    CLI::App app{"t", "prog"};
+    int n = 0;
+    app.add_option("--movements", n)->check(CLI::Range(1, 10));
+    cli::add_deprecated_alias(app, "--trials", "--movements", n)->check(CLI::Range(1, 10));
+    err.str("");
+    CHECK(parse(app, {"--trials", "0"}) == ec::kUsage);
+    CHECK(err.str().find("--trials") != std::string::npos);
+    CHECK(n == 0);
+  }
 }

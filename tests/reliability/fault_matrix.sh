@@ -42,7 +42,7 @@ FAIL=0
 ROWS=()
 
 paced() {  # paced session of $1 s in the background; log $W/$2.lcm, stderr $W/$2.err
-  "$RT" --backend sim --config "$CFG" --realtime --duration "$1" --log "$W/$2.lcm" >"$W/$2.out" 2>"$W/$2.err" &
+  "$RT" --backend sim --config "$CFG" --realtime --duration "$1" --out "$W/$2.lcm" >"$W/$2.out" 2>"$W/$2.err" &
   PID=$!
   sleep 0.7   # set-up (config, bus) before the hostile input
 }
@@ -113,7 +113,7 @@ for sig in HUP TERM INT; do
 done
 
 # 9. SIGPIPE: stderr into a pipe whose reader quits after one line
-( "$RT" --backend sim --config "$CFG" --realtime --duration 2 --log "$W/sigpipe.lcm" 2>&1 | head -1 >/dev/null
+( "$RT" --backend sim --config "$CFG" --realtime --duration 2 --out "$W/sigpipe.lcm" 2>&1 | head -1 >/dev/null
   echo "${PIPESTATUS[0]}" >"$W/sigpipe.rc" )
 : >"$W/sigpipe.err"
 rc=$(cat "$W/sigpipe.rc")
@@ -122,7 +122,7 @@ ok=$([ "$(stopped_ok sigpipe)" = 1 ] && [ "$(field states "$chk")" -ge 8000 ] &&
 row sigpipe "\`manip_rt ... 2>&1 \| head -1\`" 0 "$rc" "$ok" "session ran to its end (2 s = 8000 cycles + stop)"
 
 # 10. kill -9, as fast as possible
-"$RT" --backend sim --config "$CFG" --afap --lcm-url none --log "$W/kill9.lcm" >/dev/null 2>"$W/kill9.err" &
+"$RT" --backend sim --config "$CFG" --afap --lcm-url none --out "$W/kill9.lcm" >/dev/null 2>"$W/kill9.err" &
 PID=$!
 # Kill once the log holds 16 MiB (mid-session on any machine: the whole
 # as-fast-as-possible session is ~430 MB), not after a fixed time: a fast CI
@@ -140,7 +140,7 @@ row kill9 "kill -9 mid-session (log at 16 MiB), as fast as possible" 137 $rc "$o
 
 # 11. disk full: a 2 MiB tmpfs
 mkdir -p "$W/full" && mount -t tmpfs -o size=2m tmpfs "$W/full"
-"$RT" --backend sim --config "$CFG" --afap --lcm-url none --log "$W/full/diskfull.lcm" >/dev/null 2>"$W/diskfull.err"
+"$RT" --backend sim --config "$CFG" --afap --lcm-url none --out "$W/full/diskfull.lcm" >/dev/null 2>"$W/diskfull.err"
 rc=$?
 cp "$W/full/diskfull.lcm" "$W/diskfull.lcm" 2>/dev/null
 chk=$("$TOOL" check "$W/diskfull.lcm")
@@ -150,23 +150,23 @@ row diskfull "log on a full 2 MiB tmpfs" 6 $rc "$ok" "summary claims ${claimed:-
 umount "$W/full"
 
 # 12. bus start failure: no stub log
-"$RT" --backend sim --config "$CFG" --realtime --duration 1 --lcm-url 'nosuch://x' --log "$W/busfail.lcm" >/dev/null 2>"$W/busfail.err"
+"$RT" --backend sim --config "$CFG" --realtime --duration 1 --lcm-url 'nosuch://x' --out "$W/busfail.lcm" >/dev/null 2>"$W/busfail.err"
 rc=$?
 row busfail "--lcm-url nosuch://x (LCM cannot start)" 10 $rc "$([ ! -e "$W/busfail.lcm" ] && echo 1 || echo 0)" \
   "stub log left behind: $([ -e "$W/busfail.lcm" ] && echo "yes, $(stat -c %s "$W/busfail.lcm") B" || echo no)"
 
 # 13. a second instance on the same log with --force
 paced 3 second
-"$RT" --backend sim --config "$CFG" --realtime --duration 1 --force --lcm-url none --log "$W/second.lcm" >/dev/null 2>"$W/second2.err"
+"$RT" --backend sim --config "$CFG" --realtime --duration 1 --force --lcm-url none --out "$W/second.lcm" >/dev/null 2>"$W/second2.err"
 rc2=$?
 wait $PID; rc=$?
 cat "$W/second2.err" >>"$W/second.err"
 ok=$([ "$rc" = 0 ] && [ "$(stopped_ok second)" = 1 ] && echo 1 || echo 0)
-row second "second manip_rt --force on the same --log" 6 $rc2 "$ok" "first instance: exit $rc, its log intact"
+row second "second manip_rt --force on the same --out" 6 $rc2 "$ok" "first instance: exit $rc, its log intact"
 
 # 14. bad --duration
 for d in nan -1 inf; do
-  "$RT" --backend sim --config "$CFG" --duration "$d" --lcm-url none --log "$W/dur.lcm" >/dev/null 2>"$W/dur$d.err"
+  "$RT" --backend sim --config "$CFG" --duration "$d" --lcm-url none --out "$W/dur.lcm" >/dev/null 2>"$W/dur$d.err"
   rc=$?
   named=$(grep -c -- "--duration" "$W/dur$d.err")
   cp "$W/dur$d.err" "$W/dur_$d.err"

@@ -18,6 +18,7 @@
 
 #include <filesystem>
 #include <initializer_list>
+#include <iostream>
 #include <optional>
 #include <string>
 #include <vector>
@@ -45,6 +46,25 @@ CLI::Option* add_force(CLI::App& app, bool& force);
 CLI::Option* add_movements(CLI::App& app, int& n, int min_n, int max_n, const std::string& what);
 // --config FILE; the help names the default file and the search path.
 CLI::Option* add_config(CLI::App& app, std::string& config, const std::string& default_name, const std::string& what);
+
+// A deprecated spelling of an option (docs/cli.md, "Deprecated aliases"):
+// it keeps working, sets the same `target`, and prints one line on stderr
+// ("manip_rt: --log is deprecated; use --out") whenever it is used, even with
+// --quiet (it is a warning). Given together with `new_name` it is refused
+// (exit 2). Add the replacement's checks to the returned option.
+template <class T>
+CLI::Option* add_deprecated_alias(CLI::App& app, const std::string& old_name, const std::string& new_name, T& target) {
+  auto* o = app.add_option_function<T>(
+      old_name,
+      [&target, old_name, new_name, prog = app.get_name()](const T& v) {
+        std::cerr << (prog.empty() ? std::string() : prog + ": ") << old_name << " is deprecated; use " << new_name
+                  << "\n";
+        target = v;
+      },
+      "deprecated alias of " + new_name);
+  if (auto* n = app.get_option_no_throw(new_name)) o->excludes(n);
+  return o;
+}
 
 // Validators (CLI11 prefixes the message with the option name: "--mass-kg: ...").
 // A floating-point value that is finite (no nan, inf).

@@ -32,11 +32,17 @@ struct PsdReport {
   double ratio_at_1hz_db{std::numeric_limits<double>::quiet_NaN()};
 };
 
+// Ground truth of a simulated log. `available`, d_nspm, k_npm, m_kg, model:
+// the intrinsic truth (per-trial MANIP_TRUTH_IMPEDANCE, the person's own D, K
+// about the movement) averaged over the used trials. `apparent`: the session's
+// apparent truth (intrinsic + feedback within the window, trial_data.hpp), if
+// the log carries one; it can be present without the intrinsic one.
 struct TruthSummary {
   bool available{false};
   int n_trials{0};
   Mat2 d_nspm{Mat2::Zero()}, k_npm{Mat2::Zero()}, m_kg{Mat2::Zero()};
   std::string model;
+  std::optional<ApparentTruth> apparent;
 };
 
 struct Report {
@@ -62,6 +68,9 @@ class SessionEstimator {
   // perturbed trial is isolated here at once and only its windows are kept;
   // with cutoff_auto it is kept whole until finish().
   void add_trial(const SessionInfo& info, TrialData&& t);
+  // The session's apparent truth (TrialAssembler::apparent_truth()), carried
+  // into Report::truth.apparent. Any time before finish().
+  void set_apparent_truth(const ApparentTruth& a) { apparent_ = a; }
   // Runs the methods; issues/warnings gathered while reading are appended.
   Report finish(std::vector<TrialIssue> issues, std::vector<std::string> warnings);
 
@@ -87,6 +96,7 @@ class SessionEstimator {
   DataWindow windows_{DataWindow::variational};  // union of their needs
   SessionInfo info_;
   bool have_info_{false};
+  std::optional<ApparentTruth> apparent_;
   std::vector<TrialData> perturbed_;  // cutoff_auto only
   std::vector<Prepared> prepared_;    // fixed cut-off
   std::vector<double> psd_unpert_, psd_pert_, f_;

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <variant>
@@ -46,6 +47,20 @@ struct TrialData {
   Mat2 truth_m_kg{Mat2::Zero()}, truth_d_nspm{Mat2::Zero()}, truth_k_npm{Mat2::Zero()};
   std::string truth_model;
   [[nodiscard]] std::size_t size() const { return x_m.size(); }
+};
+
+// The session-level truth of a simulated log: one MANIP_TRUTH_IMPEDANCE with
+// trial = -1 and model = "apparent" (docs/simulation.md, "Apparent-impedance
+// truth"): the constant D, K (M_BSP fixed as the estimator takes it) that best
+// fit the exact, noise-free variational signals over [0, t_est_s] after onset,
+// pooled over the session's perturbed trials. It includes every pathway acting
+// within the window (intrinsic + reflex: what the paper calls involuntary),
+// unlike the per-trial intrinsic truth. Shoulder frame, SI units.
+inline constexpr const char* kApparentTruthModel = "apparent";  // = sim::kApparentTruthModel (the writer)
+struct ApparentTruth {
+  Mat2 m_kg{Mat2::Zero()}, d_nspm{Mat2::Zero()}, k_npm{Mat2::Zero()};
+  double t_est_s{0.0};
+  std::string model;
 };
 
 // A trial that could not be used, and why (reported, never silently dropped).
@@ -104,6 +119,8 @@ class TrialAssembler final : public logging::SessionHandler {
   [[nodiscard]] const SessionInfo& session() const { return info_; }
   [[nodiscard]] const std::vector<TrialIssue>& issues() const { return issues_; }
   [[nodiscard]] const std::vector<std::string>& warnings() const { return warnings_; }
+  // The session's apparent truth, if the log carries one (simulated logs).
+  [[nodiscard]] const std::optional<ApparentTruth>& apparent_truth() const { return apparent_; }
   [[nodiscard]] std::int64_t states_seen() const { return states_; }
   [[nodiscard]] std::int64_t cycle_gaps() const { return gaps_; }
 
@@ -143,6 +160,7 @@ class TrialAssembler final : public logging::SessionHandler {
   std::int64_t gaps_{0};
   std::vector<TrialIssue> issues_;
   std::vector<std::string> warnings_;
+  std::optional<ApparentTruth> apparent_;
   // Reorder window.
   std::int64_t tolerance_{kDefaultReorderCycles};
   std::deque<Pending> pending_;

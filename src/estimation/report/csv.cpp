@@ -88,6 +88,13 @@ std::string csv_text(const std::vector<std::pair<std::string, Report>>& reports)
         row("truth", "truth", "", NAN, element("K", i), r.truth.k_npm(i / 2, i % 2), NAN, NAN, NAN, "", r.truth.n_trials,
             true, "");
     }
+    // The apparent truth (session-level, intrinsic + feedback within the window): method "truth_apparent".
+    if (const auto& ap = r.truth.apparent) {
+      for (int i = 0; i < 4; ++i)
+        row("truth_apparent", "truth", "", NAN, element("D", i), ap->d_nspm(i / 2, i % 2), NAN, NAN, NAN, "", 0, true, "");
+      for (int i = 0; i < 4; ++i)
+        row("truth_apparent", "truth", "", NAN, element("K", i), ap->k_npm(i / 2, i % 2), NAN, NAN, NAN, "", 0, true, "");
+    }
   }
   return o.str();
 }

@@ -138,9 +138,15 @@ nlohmann::json to_json(const Report& r, const std::string& log_name) {
     j["psd"]["unit"] = "(m/s^3)^2/Hz";
   }
   j["default_method"] = default_method();
+  // "truth": the intrinsic truth (per-trial messages, averaged; key kept for
+  // existing readers); "truth_apparent": the session's apparent truth
+  // (intrinsic + feedback within [0, t_est_s]); docs/estimator.md.
   if (r.truth.available)
-    j["truth"] = {{"model", r.truth.model}, {"n_trials", r.truth.n_trials}, {"D_Nspm", mat(r.truth.d_nspm)},
-                  {"K_Npm", mat(r.truth.k_npm)}, {"M_kg", mat(r.truth.m_kg)}};
+    j["truth"] = {{"kind", "intrinsic"},          {"model", r.truth.model},  {"n_trials", r.truth.n_trials},
+                  {"D_Nspm", mat(r.truth.d_nspm)}, {"K_Npm", mat(r.truth.k_npm)}, {"M_kg", mat(r.truth.m_kg)}};
+  if (const auto& ap = r.truth.apparent)
+    j["truth_apparent"] = {{"kind", "apparent"},       {"model", ap->model},          {"t_est_s", ap->t_est_s},
+                           {"D_Nspm", mat(ap->d_nspm)}, {"K_Npm", mat(ap->k_npm)}, {"M_kg", mat(ap->m_kg)}};
   auto& iss = j["issues"] = nlohmann::json::array();
   for (const auto& i : r.issues) iss.push_back({{"trial", i.trial}, {"reason", i.reason}});
   j["warnings"] = r.warnings;
