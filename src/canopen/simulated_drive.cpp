@@ -107,6 +107,7 @@ uint16_t SimulatedDrive::statusword() const {
       state_ != cia402::State::FaultReactionActive && state_ != cia402::State::NotReadyToSwitchOn &&
       state_ != cia402::State::SwitchOnDisabled)
     s |= cia402::sw::kQuickStop;
+  if (faults_.power_stage_lost) s &= static_cast<uint16_t>(~cia402::sw::kVoltageEnabled);
   return static_cast<uint16_t>(s | faults_.statusword_extra);
 }
 
@@ -254,8 +255,23 @@ void SimulatedDrive::step_state_machine() {
     if (Entry* e = find(0x1002, 0)) e->value = 0;
     reset_emcy_pending_ = true;  // EMCY 0x0000 "error reset"
   }
+  apply_power_loss(before);
   // Only rising edges count: remember the bit so a held bit 7 does nothing.
   prev_controlword_ = controlword_;
+}
+
+void SimulatedDrive::apply_power_loss(cia402::State before) {
+  using S = cia402::State;
+  if (!faults_.power_stage_lost) return;
+  const bool energised = state_ == S::SwitchedOn || state_ == S::OperationEnabled || state_ == S::QuickStopActive;
+  if (!energised) return;
+  if (faults_.power_loss_state == S::OperationEnabled) {
+    // Keeps an energised state it already had (bit 4 off), but cannot enter
+    // one: transitions 3, 4, 16 need high voltage.
+    if (state_ != before) state_ = before;
+    return;
+  }
+  state_ = faults_.power_loss_state == S::ReadyToSwitchOn ? S::ReadyToSwitchOn : S::SwitchOnDisabled;
 }
 
 void SimulatedDrive::enter_fault(uint16_t code, uint32_t event_status) {
@@ -287,7 +303,8 @@ void SimulatedDrive::send_emcy(uint16_t code, uint8_t reg, uint32_t mfr, FrameBu
 }
 
 void SimulatedDrive::integrate(double dt) {
-  const bool on = state_ == cia402::State::OperationEnabled && nmt_ == NmtState::Operational && powered_;
+  const bool on = state_ == cia402::State::OperationEnabled && nmt_ == NmtState::Operational && powered_ &&
+                  !faults_.power_stage_lost;
   const double motor = on ? target_torque_ / 1000.0 * p_.rated_current_a * p_.force_constant_n_per_a : 0.0;
   applied_force_n_ = motor;
   if (p_.external_plant) return;  // the stage is integrated by the caller (set_plant_state)
@@ -517,6 +534,7 @@ void SimulatedDrive::process(int64_t now, std::span<const CanFrame> rx, FrameBuf
   last_now_us_ = now;
   if (!powered_ && boot_at_us_ >= 0 && now >= boot_at_us_ - p_.boot_delay_us) powered_ = true;
   if (!powered_) return;
+  apply_power_loss(state_);  // STO / e-stop: the power stage drops out (no CANopen fault)
   integrate(dt);
   if (!booted_) {
     if (!faults_.never_boot && boot_at_us_ >= 0 && now >= boot_at_us_) boot(now, tx);

@@ -57,6 +57,17 @@ struct SimFaults {
   uint16_t statusword_extra = 0;    // bits ORed into 0x6041 (e.g. a manufacturer-specific STO bit)
   bool fault_persists = false;      // the fault's cause stays (e.g. over-temperature): a reset edge does not clear it
   uint32_t digital_inputs = 0x00010000;  // 0x60FD as wired: bit 16 = e-stop chain closed (clear it to open the chain)
+  // Power stage lost (STO active / e-stop contactor open / DC link gone),
+  // without a CANopen fault: 0x6041 bit 4 (voltage enabled) reads 0 in every
+  // state, no force is applied, and transition 3 (Switch on, needs high
+  // voltage) is refused. A drive in Switched on / Operation enabled / Quick
+  // stop active falls to `power_loss_state`: Switch on disabled (default) or
+  // Ready to switch on; with Operation enabled it keeps its state and only
+  // clears bit 4 (then, when power returns, it would apply the commanded
+  // torque again by itself unless the master disables it). Clear it to
+  // restore the power; the drive stays where it fell.
+  bool power_stage_lost = false;
+  cia402::State power_loss_state = cia402::State::SwitchOnDisabled;
 };
 
 class SimulatedDrive {
@@ -120,6 +131,7 @@ class SimulatedDrive {
   void apply_rpdo(int n);
   void apply_controlword(uint16_t cw);
   void step_state_machine();
+  void apply_power_loss(cia402::State before);
   void send_emcy(uint16_t code, uint8_t reg, uint32_t mfr, FrameBuffer& tx);
   void integrate(double dt);
   int32_t position_counts() const;
