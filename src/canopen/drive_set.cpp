@@ -189,6 +189,22 @@ Error CanDriveSet::shutdown(const Ticker& tick) {
   return Error{ErrorCode::SdoTimeout, 0, 0, 0, 0, 0, t};
 }
 
+void CanDriveSet::stop(const Error& reason) {
+  enable_wanted_ = false;
+  if (faulted()) return;
+  bool any = false;
+  for (std::size_t b = 0; b < masters_.size(); ++b) {
+    if (masters_[b]->phase() != Phase::Cyclic) continue;
+    tx_[b].clear();
+    masters_[b]->fault(Error{reason.code, reason.node, reason.index, reason.sub, reason.value, reason.detail, now_us_},
+                       tx_[b]);
+    any = true;
+  }
+  if (!any) return;
+  was_faulted_ = true;  // every bus is in it already: nothing to propagate
+  for (std::size_t b = 0; b < masters_.size(); ++b) flush(b, tx_[b]);
+}
+
 bool CanDriveSet::request_fault_reset() {
   bool ok = true;
   for (auto& m : masters_) {

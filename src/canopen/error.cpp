@@ -2,6 +2,7 @@
 
 #include <cstdio>
 
+#include "manip/canopen/cia402.hpp"
 #include "manip/canopen/frame.hpp"
 
 namespace manip::canopen {
@@ -44,6 +45,10 @@ const char* to_string(ErrorCode c) {
     case ErrorCode::OperatorStop: return "stopped by the operator";
     case ErrorCode::CycleOverrun: return "control cycle late: SYNC periods skipped";
     case ErrorCode::FaultResetFailed: return "fault reset did not clear the drive fault (cause still present?)";
+    case ErrorCode::UncommandedDisable:
+      return "drive left Operation enabled without a command from the master (e-stop chain / STO / power stage "
+             "supply lost, quick stop, or an unexpected state)";
+    case ErrorCode::EStopChain: return "e-stop chain open";
   }
   return "?";
 }
@@ -153,6 +158,14 @@ std::string describe(const Error& e) {
     case ErrorCode::DriveFault:
     case ErrorCode::FaultResetFailed:
       add(" (statusword 0x%04X)", e.value);
+      break;
+    case ErrorCode::UncommandedDisable:
+      add(" (statusword 0x%04X: %s, voltage enabled bit 4 %s); both drives disabled until the operator's FAULT_RESET",
+          e.value, cia402::to_string(cia402::decode(static_cast<uint16_t>(e.value))),
+          (e.value & cia402::sw::kVoltageEnabled) ? "on" : "off");
+      break;
+    case ErrorCode::EStopChain:
+      add("; both drives disabled until the operator's FAULT_RESET");
       break;
     case ErrorCode::BusLoadTooHigh:
       add(" (%u.%u %% > limit %u.%u %%)", e.value / 10, e.value % 10, e.detail / 10, e.detail % 10);

@@ -249,6 +249,7 @@ void Master::enter_fault(const Error& e, FrameBuffer& tx) {
   for (auto& n : nodes_) {
     n.controlword = cia402::cw::kDisableVoltage;
     n.torque_permille = 0;
+    n.operation_enabled = false;
   }
   emit_cyclic(tx);
   next_sync_us_ = now_us_ + sync_period_us_;
@@ -257,8 +258,11 @@ void Master::enter_fault(const Error& e, FrameBuffer& tx) {
 void Master::fault(const Error& e, FrameBuffer& tx) { enter_fault(e, tx); }
 
 bool Master::recoverable(ErrorCode c) const {
+  // An uncommanded disable (e-stop / STO) and an open e-stop chain keep the
+  // drives' configuration: the operator's reset re-enables (2-3-4) once the
+  // backend no longer reports the chain open.
   return c == ErrorCode::DriveFault || c == ErrorCode::EmcyFault || c == ErrorCode::TpdoMissing ||
-         c == ErrorCode::OperatorStop;
+         c == ErrorCode::OperatorStop || c == ErrorCode::UncommandedDisable || c == ErrorCode::EStopChain;
 }
 
 bool Master::request_fault_reset() {
@@ -297,6 +301,7 @@ void Master::set_command(std::size_t slot, uint16_t controlword, int16_t torque)
   if (slot >= nodes_.size()) return;
   NodeStatus& n = nodes_[slot];
   if (phase_ == Phase::Cyclic) {
+    if (controlword != cia402::cw::kEnableOperation) n.operation_enabled = false;  // commanded departure
     n.controlword = controlword;
     // Zero torque unless the drive is (being) enabled: targets are preloaded
     // with zero before Enable operation.
@@ -389,8 +394,24 @@ void Master::on_tpdo(int slot, int pdo, const CanFrame& f, FrameBuffer& tx) {
   n.feedback_time_us = now_us_;
   if (pdo == 0 && (phase_ == Phase::Cyclic)) {
     const auto st = cia402::decode(n.statusword);
-    if (st == cia402::State::Fault || st == cia402::State::FaultReactionActive)
+    if (st == cia402::State::Fault || st == cia402::State::FaultReactionActive) {
       enter_fault(Error{ErrorCode::DriveFault, n.node_id, 0, 0, n.statusword, 0, now_us_}, tx);
+    } else if (n.controlword == cia402::cw::kEnableOperation) {
+      // The master asks for Operation enabled (transition 4, then holds it).
+      // A drive that leaves it by itself without a CANopen fault (STO / e-stop
+      // contactor: bit 4 off, a fall to Switch on disabled (transitions 9/10/
+      // 12 taken by the drive) or Ready to switch on, Quick stop active, any
+      // other state) must not be walked back through 2-3-4 when its power
+      // returns: fault the bus (safe state on every bus, both axes) until the
+      // operator's reset (IEC 60204-1 §9.2.5.4.2: no automatic restart).
+      const bool powered = st == cia402::State::OperationEnabled && (n.statusword & cia402::sw::kVoltageEnabled);
+      if (powered) {
+        n.operation_enabled = true;
+      } else if (n.operation_enabled) {
+        n.operation_enabled = false;
+        enter_fault(Error{ErrorCode::UncommandedDisable, n.node_id, 0, 0, n.statusword, 0, now_us_}, tx);
+      }
+    }
   }
 }
 

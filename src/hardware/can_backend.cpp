@@ -39,8 +39,14 @@ ForceBoundaryParams boundary_params(const cc::BackendOptions& b) {
 // fault (CiA 402 Fault, a faulting EMCY, a reboot mid-session) -> kDriveFault;
 // anything on the way (heartbeat, TPDOs, bus-off, refused sends, an
 // unexpected node) -> kBackendError. Both latch the supervisor's kBackend fault.
-std::uint32_t status_bit(cc::ErrorCode c) {
-  switch (c) {
+std::uint32_t status_bit(const cc::Error& e) {
+  switch (e.code) {
+    // A drive that left Operation enabled by itself with 0x6041 bit 4
+    // (voltage enabled) off lost its power stage: the e-stop chain / STO.
+    case cc::ErrorCode::UncommandedDisable:
+      return (e.value & cc::cia402::sw::kVoltageEnabled) ? bs::kDriveFault : bs::kHwEStopOpen;
+    case cc::ErrorCode::EStopChain:
+      return bs::kHwEStopOpen;
     case cc::ErrorCode::DriveFault:
     case cc::ErrorCode::EmcyFault:
     case cc::ErrorCode::NodeRebooted:
@@ -341,9 +347,63 @@ void CanBackend::read(control::SensorReading& out) {
 
   std::uint32_t st = 0;
   if (fb.enabled) st |= bs::kDrivesEnabled;
-  if (fb.faulted) {
+  // Safety inputs, every cycle: the e-stop chain / STO as the drives report it.
+  const auto& bo = can_.backend;
+  for (int a = 0; a < 2; ++a) {
+    const std::uint16_t sw = fb.statusword[std::size_t(a)];
+    const std::uint32_t di = fb.digital_inputs[std::size_t(a)];
+    bool open = false, by_input = false;
+    if (bo.estop_statusword_bit >= 0) open |= (((sw >> bo.estop_statusword_bit) & 1u) != 0) == bo.estop_active_high;
+    // The chain's own contact on a drive input, CiA 402 0x60FD in a TPDO
+    // (fresh every SYNC period).
+    if (bo.estop_input_bit >= 0 && (((di >> bo.estop_input_bit) & 1u) != 0) == bo.estop_input_open_high) {
+      open = true;
+      by_input = true;
+    }
+    // CiA 402 0x6041 bit 4 (voltage enabled) gone while Operation enabled: the
+    // power stage lost its supply (STO / e-stop contactor).
+    if (bo.estop_on_voltage_loss && fb.state[std::size_t(a)] == cc::cia402::State::OperationEnabled &&
+        !(sw & cc::cia402::sw::kVoltageEnabled))
+      open = true;
+    if (open) {
+      if (!(st & bs::kHwEStopOpen) && !estop_open_) {  // the chain opened in this cycle: note it
+        Note n;
+        n.cycle = loop_cycle_;
+        n.status = bs::kHwEStopOpen;
+        n.kind = Latch::kEStop;
+        n.axis = a;
+        n.statusword = sw;
+        n.by_input = by_input;
+        n.inputs = di;
+        note(n);
+      }
+      st |= bs::kHwEStopOpen;
+      if (latch_ == Latch::kNone) {
+        latch_ = Latch::kEStop;
+        estop_axis_ = a;
+        estop_statusword_ = sw;
+        estop_by_input_ = by_input;
+        estop_inputs_ = di;
+      }
+    }
+  }
+  estop_open_ = (st & bs::kHwEStopOpen) != 0;
+  if (estop_open_) {
+    // An open chain disarms both drives now (safe state on every bus): when
+    // it closes they stay disabled until the operator's FAULT_RESET, which
+    // the supervisor refuses while the chain reads open (present).
+    if (!set_->faulted()) {
+      set_->stop(cc::Error{cc::ErrorCode::EStopChain, 0, 0, 0, 0, 0, now_us_});
+      fault_seen_ = true;  // its reason is the e-stop note above
+      reset_ = Reset::kNone;
+    } else if (!fault_seen_ && set_->error().code == cc::ErrorCode::UncommandedDisable) {
+      fault_seen_ = true;  // the master saw the same event (the drive dropped out): one note, the e-stop's
+      reset_ = Reset::kNone;
+    }
+  }
+  if (fb.faulted || set_->faulted()) {
     cc::Error e = set_->error();
-    std::uint32_t bit = status_bit(e.code);
+    std::uint32_t bit = status_bit(e);
     // Acknowledgeable faults raise their bit in the detecting cycle only (the
     // supervisor latches it; the master holds the drives disabled until the
     // operator's reset); faults that need a restart stay present.
@@ -396,6 +456,9 @@ void CanBackend::read(control::SensorReading& out) {
         reset_ = Reset::kNone;
       } else if (now_us_ > reset_deadline_us_) {
         reset_ = Reset::kNone;
+        // Give up the walk: a drive waiting in Ready to switch on for its
+        // power (transition 3) must not complete it later by itself.
+        set_->cancel_enable();
         const cc::Error e{cc::ErrorCode::EnableTimeout, 0, 0, 0, 0, can_.master.enable_timeout_ms, now_us_};
         if (latch_ == Latch::kNone) {
           latch_ = Latch::kCanopen;
@@ -411,47 +474,6 @@ void CanBackend::read(control::SensorReading& out) {
       }
     }
   }
-  // Safety inputs, every cycle: the e-stop chain / STO as the drives report it.
-  const auto& bo = can_.backend;
-  for (int a = 0; a < 2; ++a) {
-    const std::uint16_t sw = fb.statusword[std::size_t(a)];
-    const std::uint32_t di = fb.digital_inputs[std::size_t(a)];
-    bool open = false, by_input = false;
-    if (bo.estop_statusword_bit >= 0) open |= (((sw >> bo.estop_statusword_bit) & 1u) != 0) == bo.estop_active_high;
-    // The chain's own contact on a drive input, CiA 402 0x60FD in a TPDO
-    // (fresh every SYNC period).
-    if (bo.estop_input_bit >= 0 && (((di >> bo.estop_input_bit) & 1u) != 0) == bo.estop_input_open_high) {
-      open = true;
-      by_input = true;
-    }
-    // CiA 402 0x6041 bit 4 (voltage enabled) gone while Operation enabled: the
-    // power stage lost its supply (STO / e-stop contactor).
-    if (bo.estop_on_voltage_loss && fb.state[std::size_t(a)] == cc::cia402::State::OperationEnabled &&
-        !(sw & cc::cia402::sw::kVoltageEnabled))
-      open = true;
-    if (open) {
-      if (!(st & bs::kHwEStopOpen) && !estop_open_) {  // the chain opened in this cycle: note it
-        Note n;
-        n.cycle = loop_cycle_;
-        n.status = bs::kHwEStopOpen;
-        n.kind = Latch::kEStop;
-        n.axis = a;
-        n.statusword = sw;
-        n.by_input = by_input;
-        n.inputs = di;
-        note(n);
-      }
-      st |= bs::kHwEStopOpen;
-      if (latch_ == Latch::kNone) {
-        latch_ = Latch::kEStop;
-        estop_axis_ = a;
-        estop_statusword_ = sw;
-        estop_by_input_ = by_input;
-        estop_inputs_ = di;
-      }
-    }
-  }
-  estop_open_ = (st & bs::kHwEStopOpen) != 0;
   if (fo.stale) {
     st |= bs::kBackendError;
     if (!stale_) {

@@ -145,3 +145,86 @@ TEST_CASE("canopen drive set: the cyclic path does not allocate (10000 cycles)")
   CHECK(g_allocations.load() > 0);
   CHECK(text == "node 1: heartbeat lost (after 150 ms)");
 }
+
+// An e-stop / STO that drops a drive out of Operation enabled without a
+// CANopen fault (0x6041 bit 4 off; the drive falls to Switch on disabled or
+// Ready to switch on, or stays in Operation enabled without power): the
+// master faults the bus (UncommandedDisable, safe state on every bus, both
+// axes) and nothing re-enables when the power returns, only an operator
+// reset (IEC 60204-1 §9.2.5.4.2). Before this, write() kept walking the
+// drive back through transitions 2-3-4 by itself.
+TEST_CASE("canopen drive set: a drive leaving Operation enabled by itself disarms both drives until the reset") {
+  Session s(kTwoBuses);
+  s.record = true;
+  s.start();
+  DriveSetFeedback fb = s.cycle();
+  for (int i = 0; i < 200; ++i) fb = s.cycle(pd(fb, Vec2::Zero(), 2000, 60));
+  REQUIRE(fb.enabled);
+  cia402::State falls_to = cia402::State::SwitchOnDisabled;
+  SECTION("falls to Switch on disabled") { falls_to = cia402::State::SwitchOnDisabled; }
+  SECTION("falls to Ready to switch on") { falls_to = cia402::State::ReadyToSwitchOn; }
+  SECTION("stays in Operation enabled with bit 4 off") { falls_to = cia402::State::OperationEnabled; }
+  INFO(cia402::to_string(falls_to));
+  SimulatedDrive& d = s.rig.drive(0);
+  d.faults().power_loss_state = falls_to;
+  d.faults().power_stage_lost = true;
+  const int n = s.run_until_fault(8);
+  REQUIRE(n > 0);
+  CHECK(s.set.error().code == ErrorCode::UncommandedDisable);
+  CHECK(s.set.error().node == d.node_id());
+  CHECK((s.set.error().value & cia402::sw::kVoltageEnabled) == 0);
+  CHECK(describe(s.set.error()).find("left Operation enabled without a command") != std::string::npos);
+  CHECK(s.set.fault_acknowledgeable());
+  s.check_safe_state_after_fault();  // both buses: Disable voltage + zero torque + SYNC, both drives off
+  d.faults().power_stage_lost = false;  // power back
+  int op = 0, torque = 0;
+  for (int i = 0; i < 4000; ++i) {  // 1 s, the controller still asking for force
+    fb = s.cycle(Vec2(5.0, -5.0));
+    for (std::size_t k = 0; k < s.rig.drive_count(); ++k) {
+      op += s.rig.drive(k).state() == cia402::State::OperationEnabled;
+      torque += s.rig.drive(k).target_torque_permille() != 0;
+    }
+  }
+  CHECK(op == 0);
+  CHECK(torque == 0);
+  CHECK(s.set.faulted());
+  CHECK_FALSE(s.set.enable_wanted());
+  // The operator's reset: back to cyclic (no drive in Fault: no edge needed),
+  // then the real-time enable walks 2-3-4 with zero torque preloaded.
+  REQUIRE(s.set.request_fault_reset());
+  int k = 0;
+  while (s.set.faulted() && k++ < 100) fb = s.cycle();
+  REQUIRE_FALSE(s.set.faulted());
+  CHECK(d.fault_resets() == 0);  // it was never in Fault: no bit-7 edge was sent
+  s.set.request_enable();
+  k = 0;
+  while (!fb.enabled && k++ < 2000) fb = s.cycle();
+  INFO("cycles to Operation enabled: " << k);
+  REQUIRE(fb.enabled);
+  // A commanded disable (transition 9) is not a departure.
+  CHECK_FALSE(s.set.disable(s.ticker()));
+  CHECK_FALSE(s.set.faulted());
+}
+
+TEST_CASE("canopen drive set: an enable that cannot complete can be cancelled and never completes later") {
+  Session s(kTwoBuses);
+  s.start();
+  DriveSetFeedback fb = s.cycle();
+  CHECK_FALSE(s.set.disable(s.ticker()));
+  SimulatedDrive& d = s.rig.drive(1);
+  d.faults().power_stage_lost = true;  // transition 3 needs the power stage
+  s.set.request_enable();
+  for (int i = 0; i < 400; ++i) fb = s.cycle();
+  CHECK_FALSE(fb.enabled);
+  CHECK(d.state() != cia402::State::OperationEnabled);
+  CHECK(s.rig.drive(0).state() == cia402::State::OperationEnabled);  // the powered one got there
+  s.set.cancel_enable();
+  for (int i = 0; i < 4; ++i) fb = s.cycle();  // commanded Disable voltage (transition 9): not a departure
+  d.faults().power_stage_lost = false;
+  for (int i = 0; i < 4000; ++i) {
+    fb = s.cycle(Vec2(5.0, 5.0));
+    REQUIRE(s.rig.drive(0).state() != cia402::State::OperationEnabled);
+    REQUIRE(d.state() != cia402::State::OperationEnabled);
+  }
+  CHECK_FALSE(s.set.faulted());
+}

@@ -465,6 +465,11 @@ TEST_CASE("can backend in run_session: a drive fault mid-session ends it with th
     want = manip::control::fault::kHardwareEStop;
     word = "e-stop";
   }
+  SECTION("STO without a CANopen fault: the drive falls to Switch on disabled") {
+    inject = [](hw::CanBackend& b) { b.sim_drive(1)->faults().power_stage_lost = true; };
+    want = manip::control::fault::kHardwareEStop;
+    word = "Operation enabled";
+  }
   hw::CanBackend can_b(cfg, cfg.sim, can);
   Injecting b(can_b, 8000, inject);  // 2 s into the session
   const std::string path = (std::filesystem::temp_directory_path() /
@@ -665,6 +670,244 @@ TEST_CASE("can backend: a reset that cannot clear never does; a fault that needs
     CHECK(b.drives().faulted());
     for (int a = 0; a < 2; ++a) CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
   }
+}
+
+// ---------------------------------------------------------------------------
+// E-stop / STO without a CANopen fault (docs/hardware.md "Fault policy"): a
+// drive that leaves Operation enabled without the master's command (power
+// stage lost, STO, quick stop, any other state) disarms the enable intent of
+// both drives; nothing re-energises when the power comes back, only the
+// operator's FAULT_RESET (IEC 60204-1 §9.2.5.4.2: resetting the e-stop shall
+// not restart the machine).
+
+namespace {
+// Per cycle: no drive back in Operation enabled, no torque on either RPDO.
+struct Watch {
+  int op_enabled_cycles{0};
+  int torque_cycles{0};
+  double max_force{0};
+  void see(hw::CanBackend& b) {
+    for (int a = 0; a < 2; ++a) {
+      const cc::SimulatedDrive& d = *b.sim_drive(a);
+      op_enabled_cycles += d.state() == cc::cia402::State::OperationEnabled;
+      torque_cycles += d.target_torque_permille() != 0;
+      max_force = std::max(max_force, std::abs(d.applied_force_n()));
+    }
+  }
+};
+// The supervised loop with the counting allocator around the loop cycles
+// only (the drain is the logger's side).
+struct Counted {
+  Counted(SupervisedLoop& loop, hw::CanBackend& backend) : s(loop), b(backend) {}
+  SupervisedLoop& s;
+  hw::CanBackend& b;
+  long news{0};
+  Watch w;
+  bool watch{false};
+  void run(int n) {
+    for (int i = 0; i < n; ++i) {
+      {
+        const manip::test::ThreadAllocScope scope;
+        s.cycles(1);
+        news += scope.counts().news;
+      }
+      if (watch) w.see(b);
+      if ((i & 255) == 255) drain();
+    }
+    drain();
+  }
+  void drain() {
+    s.drain();
+    hw::BackendFaultNote note;
+    while (b.next_fault_note(note)) notes.push_back(note);
+  }
+  std::vector<hw::BackendFaultNote> notes;
+  template <class P>
+  int until(P pred, int max) {
+    for (int i = 1; i <= max; ++i) {
+      run(1);
+      if (pred()) return i;
+    }
+    return -1;
+  }
+};
+bool safe_mode(manip::control::Mode m) { return m == manip::control::Mode::kFault || m == manip::control::Mode::kEStop; }
+}  // namespace
+
+TEST_CASE("can backend: after an e-stop / STO without a CANopen fault the drives stay disabled until the operator's "
+          "FAULT_RESET", "[can_backend][estop][fault_reset][no_alloc]") {
+  using manip::control::Mode;
+  using S = cc::cia402::State;
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());  // shipped e-stop detection: estop_on_voltage_loss only
+  started(b);
+  SupervisedLoop s(cfg, b);
+  Counted c{s, b};
+  c.run(2000);
+  REQUIRE(s.mode() == Mode::kRunning);
+  REQUIRE(s.body.reading().status == bs::kDrivesEnabled);
+  cc::SimulatedDrive& d = *b.sim_drive(0);
+  S falls_to = S::SwitchOnDisabled;
+  SECTION("the drive falls to Switch on disabled") { falls_to = S::SwitchOnDisabled; }
+  SECTION("the drive falls to Ready to switch on") { falls_to = S::ReadyToSwitchOn; }
+  SECTION("the drive stays in Operation enabled with 0x6041 bit 4 (voltage enabled) off") { falls_to = S::OperationEnabled; }
+  d.faults().power_loss_state = falls_to;
+  d.faults().power_stage_lost = true;  // e-stop pressed: STO on the drive of axis 0
+  INFO("power loss state " << cc::cia402::to_string(falls_to));
+  const int n = c.until([&] { return safe_mode(s.mode()); }, 8);
+  INFO("reason: " << b.fault_reason());
+  CHECK(n > 0);  // latched in the detecting cycle (the next TPDO)
+  c.run(2);        // within one SYNC period: both drives disabled (one axis alone moving is unsafe)
+  for (int a = 0; a < 2; ++a) {
+    CHECK(b.sim_drive(a)->state() != S::OperationEnabled);
+    CHECK(b.sim_drive(a)->applied_force_n() == 0.0);
+  }
+  // The reason: the master's (the drive left Operation enabled by itself)
+  // or, when the drive still reported Operation enabled with bit 4 off, the
+  // backend's e-stop / STO text.
+  CHECK((b.fault_reason().find("Operation enabled") != std::string::npos ||
+         b.fault_reason().find("safe torque off") != std::string::npos));
+  c.run(400);
+  // The chain closes again (power back) and nobody resets: 1 s, nothing
+  // re-energises, only zero torque on the wire, the supervisor stays latched.
+  d.faults().power_stage_lost = false;
+  c.watch = true;
+  c.run(4000);
+  c.watch = false;
+  CHECK(c.w.op_enabled_cycles == 0);
+  CHECK(c.w.torque_cycles == 0);
+  CHECK(c.w.max_force == 0.0);
+  CHECK(safe_mode(s.mode()));
+  CHECK((s.body.reading().status & bs::kDrivesEnabled) == 0);
+  CHECK(d.state() != S::OperationEnabled);
+  CHECK(b.sim_drive(1)->state() != S::OperationEnabled);
+  bool noted = false;
+  for (const auto& note : c.notes)
+    noted |= note.text.find("Operation enabled") != std::string::npos || note.text.find("safe torque off") != std::string::npos;
+  CHECK(noted);  // the reason went through the fault-note path (fault_t.reason)
+
+  // The operator's FAULT_RESET: accepted, transitions 2-3-4, PAUSED until RESUME.
+  s.command(manip::command_t::FAULT_RESET);
+  c.run(1);
+  REQUIRE_FALSE(s.results.empty());
+  CHECK(s.results.back().kind == manip::command_t::FAULT_RESET);
+  CHECK(s.results.back().accepted);
+  CHECK(s.mode() == Mode::kPaused);
+  const int m = c.until([&] { return (s.body.reading().status & bs::kDrivesEnabled) != 0; }, 4 * 500);
+  INFO("cycles to Operation enabled after the reset: " << m);
+  REQUIRE(m > 0);
+  CHECK(d.state() == S::OperationEnabled);
+  CHECK(b.sim_drive(1)->state() == S::OperationEnabled);
+  CHECK(s.mode() == Mode::kPaused);
+  s.command(manip::command_t::RESUME);
+  c.watch = true;
+  c.w = Watch{};
+  c.run(4000);
+  CHECK(s.mode() == Mode::kRunning);
+  CHECK(s.body.reading().status == bs::kDrivesEnabled);
+  CHECK(c.w.max_force > 0.5);  // torque flows again
+  CHECK(c.news == 0);          // the whole sequence without an allocation in the loop
+}
+
+TEST_CASE("can backend: FAULT_RESET while the e-stop chain is still open is refused, the drives stay disabled",
+          "[can_backend][estop][fault_reset]") {
+  using manip::control::Mode;
+  using S = cc::cia402::State;
+  const auto cfg = rt_cfg();
+  auto can = can_cfg();
+  SECTION("chain on 0x60FD (TPDO2)") {
+    can.backend.estop_input_bit = 16;
+    can.backend.estop_input_open_high = false;
+    for (auto& dc : can.drives) {
+      dc.tpdo2 = cc::PdoMapping{};
+      dc.tpdo2.add(cc::PdoObject::DigitalInputs);
+    }
+  }
+  SECTION("chain on a manufacturer statusword bit") { can.backend.estop_statusword_bit = 14; }
+  hw::CanBackend b(cfg, cfg.sim, can);
+  started(b);
+  SupervisedLoop s(cfg, b);
+  Counted c{s, b};
+  c.run(2000);
+  REQUIRE(s.mode() == Mode::kRunning);
+  cc::SimulatedDrive& d = *b.sim_drive(1);
+  auto chain = [&](bool open) {
+    // The contact the backend reads, and the STO it drives.
+    if (can.backend.estop_input_bit >= 0) {
+      if (open) d.faults().digital_inputs &= ~(1u << 16);
+      else d.faults().digital_inputs |= 1u << 16;
+    } else {
+      d.faults().statusword_extra = open ? std::uint16_t(1u << 14) : std::uint16_t(0);
+    }
+    d.faults().power_stage_lost = open;
+  };
+  chain(true);
+  REQUIRE(c.until([&] { return safe_mode(s.mode()); }, 8) > 0);
+  c.run(40);
+  for (int a = 0; a < 2; ++a) CHECK(b.sim_drive(a)->state() != S::OperationEnabled);
+  CHECK((s.body.reading().status & bs::kHwEStopOpen) != 0);  // present while open
+  s.command(manip::command_t::FAULT_RESET);
+  c.run(1);
+  REQUIRE_FALSE(s.results.empty());
+  CHECK_FALSE(s.results.back().accepted);
+  CHECK(s.results.back().reason == manip::control::Reject::kConditionPresent);
+  CHECK((s.results.back().detail & manip::control::fault::kHardwareEStop) != 0);
+  c.watch = true;
+  c.run(4000);  // still open: nothing moves
+  chain(false);
+  c.run(4000);  // closed again, nobody reset: nothing moves either
+  c.watch = false;
+  CHECK(c.w.op_enabled_cycles == 0);
+  CHECK(c.w.torque_cycles == 0);
+  CHECK(c.w.max_force == 0.0);
+  CHECK(safe_mode(s.mode()));
+  s.command(manip::command_t::FAULT_RESET);
+  c.run(1);
+  CHECK(s.results.back().accepted);
+  REQUIRE(c.until([&] { return (s.body.reading().status & bs::kDrivesEnabled) != 0; }, 4 * 500) > 0);
+  CHECK(s.mode() == Mode::kPaused);
+  CHECK(c.news == 0);
+}
+
+TEST_CASE("can backend: a reset the voltage-only detection cannot refuse does not enable later by itself",
+          "[can_backend][estop][fault_reset]") {
+  // With only 0x6041 bit 4 (estop_on_voltage_loss), a drive in Switch on
+  // disabled cannot tell whether the chain is closed: the reset is accepted,
+  // the drive cannot switch on without power (transition 3), the enable times
+  // out (enable_timeout_ms) and faults again; when the power comes back later,
+  // nothing re-energises until the next reset.
+  using manip::control::Mode;
+  using S = cc::cia402::State;
+  const auto cfg = rt_cfg();
+  hw::CanBackend b(cfg, cfg.sim, can_cfg());
+  started(b);
+  SupervisedLoop s(cfg, b);
+  Counted c{s, b};
+  c.run(2000);
+  cc::SimulatedDrive& d = *b.sim_drive(0);
+  d.faults().power_stage_lost = true;
+  REQUIRE(c.until([&] { return safe_mode(s.mode()); }, 8) > 0);
+  c.run(400);
+  s.command(manip::command_t::FAULT_RESET);
+  c.run(1);
+  REQUIRE(s.results.back().accepted);
+  const int back = c.until([&] { return safe_mode(s.mode()); }, 4 * 600);
+  INFO("reason: " << b.fault_reason());
+  REQUIRE(back > 0);
+  CHECK(b.fault_reason().find("in time") != std::string::npos);
+  CHECK(d.state() != S::OperationEnabled);
+  d.faults().power_stage_lost = false;  // power back, nobody resets
+  c.watch = true;
+  c.run(4000);
+  CHECK(c.w.op_enabled_cycles == 0);
+  CHECK(c.w.torque_cycles == 0);
+  CHECK(safe_mode(s.mode()));
+  s.command(manip::command_t::FAULT_RESET);
+  c.run(1);
+  CHECK(s.results.back().accepted);
+  c.watch = false;
+  REQUIRE(c.until([&] { return (s.body.reading().status & bs::kDrivesEnabled) != 0; }, 4 * 500) > 0);
+  CHECK(c.news == 0);
 }
 
 TEST_CASE("can backend in run_session: the CANopen reason and the raw CAN traffic are in the log",

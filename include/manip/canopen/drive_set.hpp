@@ -52,6 +52,16 @@ class CanDriveSet {
     if (!faulted()) enable_wanted_ = true;
   }
   bool enable_wanted() const { return enable_wanted_; }
+  // Real-time disarm: stop walking / holding the drives towards Operation
+  // enabled (the next write() commands Disable voltage, transition 9/7/10).
+  // E.g. an enable that timed out: it must not complete later by itself.
+  void cancel_enable() { enable_wanted_ = false; }
+  // Real-time stop of the whole set with a reason (e.g. the backend saw the
+  // e-stop chain open): every running bus enters its safe state in this call
+  // (Disable voltage + zero torque + SYNC, flushed now), the enable intent is
+  // dropped, and only an operator reset (request_fault_reset(), then
+  // request_enable()) re-enables. No-op if already faulted.
+  void stop(const Error& reason);
   // Reset attempts (all buses) that left a drive in Fault.
   uint32_t fault_resets_failed() const;
 

@@ -33,6 +33,8 @@ enum class ErrorCode : uint8_t {
   OperatorStop,          // shutdown/e-stop requested by the operator
   CycleOverrun,          // process() called late: SYNC periods skipped
   FaultResetFailed,      // an operator fault reset (one edge on 0x6040 bit 7) left the drive in Fault
+  UncommandedDisable,    // the drive left Operation enabled (or lost 0x6041 bit 4) without the master's command
+  EStopChain,            // the backend saw the e-stop chain open (0x60FD input / STO statusword bit)
 };
 
 const char* to_string(ErrorCode c);

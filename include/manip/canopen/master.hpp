@@ -77,6 +77,11 @@ struct NodeStatus {
   bool tpdo1_seen = false;
   bool tpdo2_seen = false;
   uint16_t controlword = 0;      // commanded (RPDO1)
+  // The drive reported Operation enabled with 0x6041 bit 4 (voltage enabled)
+  // while the master commands Enable operation (0x0F): from then on, any
+  // other report until the master commands something else is a departure
+  // the master did not command (ErrorCode::UncommandedDisable).
+  bool operation_enabled = false;
   int16_t torque_permille = 0;   // commanded (RPDO1)
   uint16_t last_emcy_code = 0;
   uint32_t emcy_count = 0;
