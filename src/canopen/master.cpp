@@ -403,7 +403,7 @@ void Master::on_tpdo(int slot, int pdo, const CanFrame& f, FrameBuffer& tx) {
       // 12 taken by the drive) or Ready to switch on, Quick stop active, any
       // other state) must not be walked back through 2-3-4 when its power
       // returns: fault the bus (safe state on every bus, both axes) until the
-      // operator's reset (IEC 60204-1 §9.2.5.4.2: no automatic restart).
+      // operator's reset (IEC 60204-1, emergency stop: no automatic restart).
       const bool powered = st == cia402::State::OperationEnabled && (n.statusword & cia402::sw::kVoltageEnabled);
       if (powered) {
         n.operation_enabled = true;

@@ -151,7 +151,7 @@ TEST_CASE("canopen drive set: the cyclic path does not allocate (10000 cycles)")
 // Ready to switch on, or stays in Operation enabled without power): the
 // master faults the bus (UncommandedDisable, safe state on every bus, both
 // axes) and nothing re-enables when the power returns, only an operator
-// reset (IEC 60204-1 §9.2.5.4.2). Before this, write() kept walking the
+// reset (IEC 60204-1, emergency stop). Before this, write() kept walking the
 // drive back through transitions 2-3-4 by itself.
 TEST_CASE("canopen drive set: a drive leaving Operation enabled by itself disarms both drives until the reset") {
   Session s(kTwoBuses);

@@ -677,7 +677,7 @@ TEST_CASE("can backend: a reset that cannot clear never does; a fault that needs
 // drive that leaves Operation enabled without the master's command (power
 // stage lost, STO, quick stop, any other state) disarms the enable intent of
 // both drives; nothing re-energises when the power comes back, only the
-// operator's FAULT_RESET (IEC 60204-1 §9.2.5.4.2: resetting the e-stop shall
+// operator's FAULT_RESET (IEC 60204-1, emergency stop: resetting the e-stop shall
 // not restart the machine).
 
 namespace {
