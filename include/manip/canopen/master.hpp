@@ -137,7 +137,8 @@ class Master {
   // External fault (e.g. a safety limit in the controller): safe state now.
   void fault(const Error& e, FrameBuffer& tx);
   // Operator fault acknowledge. Only faults the drives can recover from
-  // (drive fault, EMCY fault, missing TPDOs) are acknowledgeable; the edge on
+  // (drive fault, EMCY fault, missing TPDOs, a drive that left Operation
+  // enabled by itself, an open e-stop chain) are acknowledgeable; the edge on
   // controlword bit 7 is then produced by cia402::master_step, exactly once
   // per request and per drive in Fault (CiA 402 transition 15). A drive still
   // in Fault master.enable_timeout_ms after the request (its cause persists)

@@ -70,7 +70,14 @@ canopen::CanConfig load_can_config(const std::string& path);
 // session goes on in the supervisor's PAUSED mode (hold: admittance, no
 // trials) until the operator resumes. A drive still in Fault
 // master.fault_reset_timeout_ms after the edge, or not back in Operation enabled in time, raises
-// the fault again (with its reason). Faults that lose the drives'
+// the fault again (with its reason) and cancels the enable walk.
+// E-stop / STO: a drive leaving Operation enabled without the master's
+// command (0x6041 bit 4 off, Switch on disabled, Ready to switch on, Quick
+// stop active, ...) faults its bus (canopen::ErrorCode::UncommandedDisable),
+// and an e-stop chain read open (statusword bit, 0x60FD input) stops the whole
+// set (ErrorCode::EStopChain): both drives stay disabled when the power
+// returns; only the operator's reset re-enables them, and the supervisor
+// refuses it while the chain reads open (docs/hardware.md "Fault policy"). Faults that lose the drives'
 // configuration or the bus (heartbeat loss, reboot, bus-off, unexpected
 // node, refused sends) stay present: the reset is refused ("condition
 // present") and only a restart of manip_rt re-initialises the bus.
