@@ -25,7 +25,8 @@ targets="manip_installable"
 man=no
 if grep -q '^MANIP_MAN_PAGES:INTERNAL=ON' "$build/CMakeCache.txt"; then
   man=yes
-elif command -v help2man > /dev/null 2>&1 && ! grep -q '^MANIP_MAN:STRING=OFF' "$build/CMakeCache.txt"; then
+elif command -v help2man > /dev/null 2>&1 && ! grep -q '^MANIP_MAN:STRING=OFF' "$build/CMakeCache.txt" \
+     && ! grep -q '^MANIP_SANITIZE:BOOL=ON' "$build/CMakeCache.txt"; then
   echo "FAIL: help2man is installed but $build generates no manual pages (reconfigure: cmake $build)"; exit 1
 fi
 cmake --build "$build" --target $targets -- -j2 > "$work/build.log" 2>&1 || { tail -30 "$work/build.log"; exit 1; }
