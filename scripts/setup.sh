@@ -18,6 +18,9 @@ PKGS=(
   python3-pygame xvfb xauth
   # install/CPack (.deb dependencies by dpkg-shlibdeps) and the Java/MATLAB jar (docs/matlab.md)
   dpkg-dev file default-jdk-headless liblcm-java
+  # the .deb's manual pages (help2man, from each program's --help) and its check (lintian, run
+  # by ctest install:deb; about 150 small Perl packages, 14 MiB, under 1 % of this list's download)
+  help2man lintian
   qemu-system-x86 busybox-static cpio xz-utils
   # libFuzzer harnesses (scripts/fuzz.sh) and the second standard library check
   clang libfuzzer-14-dev libclang-rt-14-dev libc++-dev libc++abi-dev

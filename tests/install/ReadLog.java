@@ -1,4 +1,4 @@
-// Reads a manip log through manip_lcmtypes.jar and Debian's lcm.jar, the way
+// Reads a manip log through manip-lcmtypes.jar and Debian's lcm.jar, the way
 // docs/matlab.md does from MATLAB, and prints the same "key value" lines as
 // tools/log_summary.cpp (the C++ reader). Codes come from the .lcm consts.
 import java.io.EOFException;

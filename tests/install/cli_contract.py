@@ -14,10 +14,12 @@
 * `--returns`: each documented code other than 70 (a bug) is produced by a
   known bad (or good) invocation, so the table and the behaviour agree; a
   code that cannot be produced on this machine (9 on a PREEMPT_RT kernel) is
-  named as skipped. The exit-0 case runs with -q and must print nothing on
+  named as skipped. A case may also require its stderr to match a pattern
+  (manip_import: the mapping's file:line: key). The exit-0 case runs with -q and must print nothing on
   stderr (docs/cli.md: only warnings and errors). `--sim` gives manip_sim,
   which writes the logs estimate_impedance's cases read.
 """
+import math
 import os
 import re
 import signal
@@ -76,6 +78,66 @@ def printed_table(help_text):
     return rows
 
 
+IMPORT_MAPPING = """time: {variable: t, unit: s}
+signals:
+  position: {variables: [x_mm, y_mm], unit: %s}
+  handle_force: {variables: [fx, fy], unit: N}
+  perturbation_force: {variables: [ux, uy], unit: N}
+frame:
+  axes: [2, -1]
+  origin_in_shoulder_m: [0.0, 0.425]
+  rotation_deg: 0
+trials:
+  index: {variable: trial, outside: -1}
+  onset: {rule: threshold, threshold_n: 0.5}
+session:
+  participant_id: P01
+  session_id: S1
+  admittance: {m_adm_kg: [5, 5], d_adm_nspm: [15, 15]}
+  m_handle_kg: [0.25, 0.25]
+  anthropometrics:
+    segment_length_m: [0.31, 0.34]
+    segment_mass_kg: [1.93, 1.52]
+    segment_com_m: [0.165, 0.19]
+    segment_inertia_kgm2: [0.0141, 0.0188]
+  perturbation: {duration_s: 0.15, amplitude_n: 15, trigger_x2_shoulder_m: 0.40}
+"""
+
+
+def import_cases(tmp, existing):
+    """manip_import: a hand-made 1 kHz CSV recording (two trials, one push,
+    as tests/importer), its mapping, and one broken variant of each."""
+    rows = ["t,x_mm,y_mm,fx,fy,ux,uy,trial"]
+    for i in range(4000):
+        t = i / 1000.0
+        u = 15.0 * math.sin(math.pi * (i - 3000) / 150.0) ** 2 if 3000 <= i <= 3150 else 0.0
+        trial = 0 if 500 <= i < 2000 else 1 if 2200 <= i < 3800 else -1
+        rows.append("%.6f,%.6f,%.6f,%.6f,-0.2,%.6f,%.6f,%d" % (
+            t, 100.0 + 10.0 * math.sin(t), -50.0 + 80.0 * t, 0.1 * t, -u * math.sin(math.radians(120)),
+            u * math.cos(math.radians(120)), trial))
+    good_csv, bad_csv = os.path.join(tmp, "rec.csv"), os.path.join(tmp, "bad_rec.csv")
+    with open(good_csv, "w") as f:
+        f.write("\n".join(rows) + "\n")
+    rows[17] = rows[17].replace("-0.2", "abc", 1)   # line 18 of the file: not a number
+    with open(bad_csv, "w") as f:
+        f.write("\n".join(rows) + "\n")
+    good_map, bad_map = os.path.join(tmp, "rig.yaml"), os.path.join(tmp, "bad_rig.yaml")
+    with open(good_map, "w") as f:
+        f.write(IMPORT_MAPPING % "mm")
+    with open(bad_map, "w") as f:
+        f.write(IMPORT_MAPPING % "inch")   # line 3: signals.position.unit
+    out = lambda name: ["--out", os.path.join(tmp, name)]
+    return {
+        0: [good_map, good_csv, "-q"] + out("imported.lcm"),
+        2: [good_map, good_csv],   # --out is required
+        # docs/import.md, "Errors": the mapping's file, line and key are named.
+        3: ("STDERR", re.escape(bad_map) + r":3: signals\.position\.unit: unknown unit 'inch'",
+            [bad_map, good_csv] + out("never.lcm")),
+        4: ("STDERR", re.escape(bad_csv) + r":18: column 'fy': not a number", [good_map, bad_csv] + out("never.lcm")),
+        6: ("STDERR", re.escape(existing) + r": exists", [good_map, good_csv, "--out", existing]),
+    }
+
+
 def returns_cases(app, src, tmp, sim=None):
     """code -> argv producing it (run in tmp), or ("SIGINT", seconds, argv), or ("SKIP", reason).
     Only codes an app documents are used."""
@@ -114,6 +176,7 @@ def returns_cases(app, src, tmp, sim=None):
             5: [none_perturbed],
             6: [good, "--json", existing],
         }
+    imp = import_cases(tmp, existing) if app == "manip_import" else {}
     cases = {
         "manip_sim": {
             0: ["--out", os.path.join(tmp, "s.lcm"), "--movements", "10", "--reps", "1", "-q"],
@@ -148,6 +211,7 @@ def returns_cases(app, src, tmp, sim=None):
             130: ("SIGINT", 1.0, ["--afap", "--lcm-url", "none", "--force"] + rt_log("int.lcm")),
         },
         "estimate_impedance": est,
+        "manip_import": imp,
         "manip_fake_drive": {
             2: ["--mass-kg", "inf"],
             # No such interface (on this kernel possibly no AF_CAN at all): the backend is unavailable.
@@ -199,17 +263,20 @@ def main():
         if check_returns:
             sim = sys.argv[sys.argv.index("--sim") + 1] if "--sim" in sys.argv else None
             cases = returns_cases(app, src, tmp, sim)
+            existing_path = os.path.join(tmp, "existing.out")   # written by returns_cases: "keep"
             if not cases:
                 failures.append("no return-code cases known for %s" % app)
             for code, case in sorted(cases.items()):
                 if code not in rows:
                     failures.append("case for code %d, which --help does not document" % code)
-                interrupt = None
+                interrupt, want_err = None, None
                 if isinstance(case, tuple) and case[0] == "SKIP":
                     print("SKIP %s: code %d: %s" % (app, code, case[1]))
                     continue
                 if isinstance(case, tuple) and case[0] == "SIGINT":
                     interrupt, args = case[1], case[2]
+                elif isinstance(case, tuple) and case[0] == "STDERR":
+                    want_err, args = case[1], case[2]
                 else:
                     args = case
                 r = run([binary] + args, tmp, interrupt)
@@ -218,6 +285,11 @@ def main():
                         " ".join(args), r.returncode, code, ref.get(code), r.stderr.strip()[-300:]))
                 elif code != 0 and not (r.stderr.strip() or r.stdout.strip()):
                     failures.append("%s -> exit %d without a message" % (" ".join(args), code))
+                elif want_err and not re.search(want_err, r.stderr):
+                    failures.append("%s -> exit %d but stderr does not match %r: %s" % (
+                        " ".join(args), code, want_err, r.stderr.strip()[-300:]))
+                elif existing_path in args and open(existing_path).read() != "keep\n":
+                    failures.append("%s -> exit %d and the existing output was changed" % (" ".join(args), code))
                 elif code == 0 and ("-q" in args or "--quiet" in args) and r.stderr.strip():
                     failures.append("%s -> exit 0 but -q printed on stderr: %s" % (" ".join(args), r.stderr.strip()[-300:]))
             undocumented = sorted(set(rows) - set(cases) - {0, 70})

@@ -8,8 +8,11 @@
 #   estimates the session, manip_rt finds rt.yaml the same way and records a
 #   session, Debian's python3 imports manipplot and the generated types from
 #   <prefix>/lib/python3/dist-packages. The package carries a machine-readable
-#   /usr/share/doc/manip/copyright (Debian policy 12.5); lintian, when
-#   installed, is run and its findings printed (only a missing copyright fails).
+#   /usr/share/doc/manip/copyright (Debian policy 12.5), changelog.Debian.gz
+#   for its version, a manual page per program when the build tree generates
+#   them (help2man; required when help2man is installed), the jar under its
+#   Debian Java name; lintian, when installed, is run and its findings
+#   printed: an error (E:) fails the test, warnings and info do not.
 # Usage: deb_install.sh BUILD_DIR
 set -eu
 build=$(cd "$1" && pwd)
@@ -17,8 +20,15 @@ work=$(mktemp -d /tmp/manip_deb_XXXXXX)
 trap 'rm -rf "$work"' EXIT
 t0=$(date +%s)
 
-targets="manip_sim_app estimate_impedance manip_rt impedance_study manip_can_check manip_fake_drive manip_lcmtypes_gen"
-grep -q '^MANIP_JAVA:BOOL=ON' "$build/CMakeCache.txt" && targets="$targets manip_lcmtypes_jar"
+# manip_installable: every program, the generated types, the jar and the manual pages (when built).
+targets="manip_installable"
+man=no
+if grep -q '^MANIP_MAN_PAGES:INTERNAL=ON' "$build/CMakeCache.txt"; then
+  man=yes
+elif command -v help2man > /dev/null 2>&1 && ! grep -q '^MANIP_MAN:STRING=OFF' "$build/CMakeCache.txt" \
+     && ! grep -q '^MANIP_SANITIZE:BOOL=ON' "$build/CMakeCache.txt"; then
+  echo "FAIL: help2man is installed but $build generates no manual pages (reconfigure: cmake $build)"; exit 1
+fi
 cmake --build "$build" --target $targets -- -j2 > "$work/build.log" 2>&1 || { tail -30 "$work/build.log"; exit 1; }
 (cd "$work" && cpack -G DEB --config "$build/CPackConfig.cmake" -B "$work/pkg" > "$work/cpack.log" 2>&1) \
   || { tail -30 "$work/cpack.log"; exit 1; }
@@ -46,16 +56,52 @@ for field in '^Format: https://www.debian.org/doc/packaging-manuals/copyright-fo
   grep -q "$field" "$cr" || { echo "FAIL: /usr/share/doc/manip/copyright lacks '$field'"; exit 1; }
 done
 echo "copyright: $(grep '^License: ' "$cr" | head -1)"
+# Debian policy 12.7: changelog.Debian.gz, its latest entry for this package version, by the Maintainer.
+version=$(dpkg-deb -f "$deb" Version) maintainer=$(dpkg-deb -f "$deb" Maintainer)
+cl="$root/usr/share/doc/manip/changelog.Debian.gz"
+[ -e "$cl" ] || { echo "FAIL: package lacks /usr/share/doc/manip/changelog.Debian.gz"; exit 1; }
+zcat "$cl" | head -1 | grep -q "^manip ($version) " || { echo "FAIL: changelog.Debian.gz is not for $version:"; zcat "$cl"; exit 1; }
+zcat "$cl" | grep -q "^ -- $maintainer  " || { echo "FAIL: changelog.Debian.gz not signed by the Maintainer ($maintainer)"; zcat "$cl"; exit 1; }
+echo "changelog: $(zcat "$cl" | head -1); Maintainer: $maintainer"
+# One manual page per program, built from its --help (help2man), that man renders without a warning.
+if [ "$man" = yes ]; then
+  n=0
+  for b in "$root"/usr/bin/*; do
+    p="$root/usr/share/man/man1/$(basename "$b").1.gz"
+    [ -e "$p" ] || { echo "FAIL: no manual page for /usr/bin/$(basename "$b")"; exit 1; }
+    zcat "$p" | grep -q '^\.SH "\?EXIT' || zcat "$p" | grep -qi 'exit codes' \
+      || { echo "FAIL: $(basename "$p") has no exit-code table"; exit 1; }
+    if zcat "$p" | grep -q 'manual page for'; then echo "FAIL: $(basename "$p"): NAME has no description"; exit 1; fi
+    if command -v man > /dev/null 2>&1; then
+      # As lintian renders it (Check/Documentation/Manual.pm: 120 columns, -Tutf8 -Z).
+      w=$(LC_ALL=C.UTF-8 MANWIDTH=120 man --warnings -E UTF-8 -l -Tutf8 -Z "$p" 2>&1 > /dev/null) || true
+      [ -z "$w" ] || { echo "FAIL: man warns on $(basename "$p"): $w"; exit 1; }
+    fi
+    n=$((n + 1))
+  done
+  echo "man pages: $n ($(zcat "$root/usr/share/man/man1/manip_sim.1.gz" | grep -A1 '^\.SH NAME' | tail -1))"
+else
+  echo "man pages: not generated (MANIP_MAN=OFF, or no help2man when configured; apt-get install help2man)"
+fi
 if command -v lintian > /dev/null 2>&1; then
-  lintian --no-tag-display-limit "$deb" > "$work/lintian.txt" 2>&1 || true
-  echo "lintian ($(lintian --version)): $(grep -c '^[EW]: ' "$work/lintian.txt") errors/warnings"
+  # -I: info tags too (printed, never failing); an error fails the test.
+  rc=0
+  lintian -I --tag-display-limit 0 "$deb" > "$work/lintian.txt" 2>&1 || rc=$?
+  e=$(grep -c '^E: ' "$work/lintian.txt") w=$(grep -c '^W: ' "$work/lintian.txt") i=$(grep -c '^I: ' "$work/lintian.txt")
+  echo "lintian ($(lintian --version)): $e errors, $w warnings, $i info"
   sed 's/^/  /' "$work/lintian.txt"
-  if grep -q 'no-copyright-file' "$work/lintian.txt"; then echo "FAIL: lintian: no-copyright-file"; exit 1; fi
+  [ "$e" -eq 0 ] || { echo "FAIL: lintian reports errors"; exit 1; }
+  # Exit 1 is lintian's "errors found"; anything above is lintian itself failing.
+  [ "$rc" -le 1 ] || { echo "FAIL: lintian exited $rc"; exit 1; }
 else
   echo "lintian: not installed (optional: apt-get install lintian)"
 fi
 if grep -q '^MANIP_JAVA:BOOL=ON' "$build/CMakeCache.txt"; then
-  [ -e "$root/usr/share/java/manip_lcmtypes.jar" ] || { echo "FAIL: package lacks the jar"; exit 1; }
+  # Debian Java policy: manip-lcmtypes-<version>.jar, and manip-lcmtypes.jar a link to it.
+  jar="$root/usr/share/java/manip-lcmtypes.jar"
+  [ -L "$jar" ] && [ "$(readlink "$jar")" = "manip-lcmtypes-${version%-*}.jar" ] && [ -f "$jar" ] \
+    || { echo "FAIL: /usr/share/java/manip-lcmtypes.jar is not a link to manip-lcmtypes-${version%-*}.jar"; ls -l "$root/usr/share/java"; exit 1; }
+  echo "jar: /usr/share/java/manip-lcmtypes.jar -> $(readlink "$jar")"
 fi
 
 # Another directory, nothing of the build or source tree in the environment.

@@ -1,5 +1,5 @@
 #!/bin/sh
-# A simulated log read through manip_lcmtypes.jar (ReadLog.java, as MATLAB
+# A simulated log read through manip-lcmtypes.jar (ReadLog.java, as MATLAB
 # would through the same classes) must give the values the C++ reader
 # (log_summary) reports: session sample rate, schema version, number of
 # states, perturbation-phase states, onsets, and the code constants.

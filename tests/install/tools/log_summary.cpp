@@ -1,5 +1,5 @@
 // The C++ reader's view of a log, as "key value" lines, for tests/install's
-// Java check (ReadLog.java prints the same keys through manip_lcmtypes.jar).
+// Java check (ReadLog.java prints the same keys through manip-lcmtypes.jar).
 // Reads with manip::logging::read_log, the reader every manip tool uses.
 #include <cstdint>
 #include <iostream>
