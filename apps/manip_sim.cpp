@@ -55,7 +55,7 @@ int run(int argc, char** argv) {
   // Checked by make_human (before any output): "unknown human model 'x'" naming the known ones.
   app.add_option("--human", human, "human model: " + models_help);
   app.add_option("--person", person, "linear human: table1 (paper Table 1) | stiff")->check(cli::one_of(kPersons));
-  cli::add_config(app, c.config, "arm_model.yaml", "--human neuromech: neuromechanical parameters YAML");
+  cli::add_config(app, c.config, "arm_model.yaml", "neuromechanical parameters YAML (read with --human neuromech)");
   app.add_option("--arm-config", arm_config_old, "deprecated alias of --config");
   std::string feedback = "config";
   app.add_option("--feedback", feedback,
