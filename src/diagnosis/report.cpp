@@ -62,9 +62,12 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
   std::ostringstream o;
   o << "diagnose_model: " << d.source << " (" << ctx.front_end << ")\n";
   if (!ctx.preprocessing.empty()) o << "  " << ctx.preprocessing << "\n";
-  o << "  " << d.n_used << " samples used (" << fmt("%.1f", d.duration_s) << " s), " << d.folds << "-fold cross-validation over contiguous blocks, guard "
-    << fmt("%.2f", d.guard_s) << " s; bootstrap over " << d.blocks << " blocks; intervals are 95 %\n\n";
-  o << "Baseline: torque = I acc + B vel + K (x - x_ref) + c\n";
+  if (ctx.cv_units.empty())
+    o << "  " << d.n_used << " samples used (" << fmt("%.1f", d.duration_s) << " s), " << d.folds << "-fold cross-validation over contiguous blocks, guard "
+      << fmt("%.2f", d.guard_s) << " s; bootstrap over " << d.blocks << " blocks; intervals are 95 %\n\n";
+  else
+    o << "  " << d.n_used << " samples used, " << d.folds << "-fold cross-validation over " << ctx.cv_units << "; intervals are 95 %\n\n";
+  o << "Baseline: " << ctx.baseline_equation << "\n";
   for (const auto& p : d.baseline_params) o << "  " << p.name << " = " << interval(p.est) << " " << p.unit << "\n";
   o << "  held-out VAF " << interval(d.baseline_heldout.vaf) << ", NRMSE " << interval(d.baseline_heldout.nrmse) << "\n";
   o << "  held-out VAF per fold (time order):";
@@ -106,7 +109,7 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
     for (const auto& p : d.final_params)
       o << "    " << p.name << " = " << interval(p.est) << " " << p.unit << (p.plausible() ? "" : "  OUTSIDE plausible range")
         << (p.at_edge() ? "  AT THE EDGE of the search range (" + g4(p.plausible_lo) + "-" + g4(p.plausible_hi) + ")" : "") << "\n";
-    o << "  share of the torque (RMS of the term / RMS of the measured torque " << g4(d.target_rms) << "):\n";
+    o << "  share of the " << ctx.target_word << " (RMS of the term / RMS of the measured " << ctx.target_word << " " << g4(d.target_rms) << "):\n";
     for (std::size_t a = 0; a < d.accepted.size() && a < d.contribution_rms.size(); ++a)
       o << "    " << d.accepted[a] << ": RMS " << g4(d.contribution_rms[a]) << " (" << fmt("%.1f", 100.0 * d.contribution_rms[a] / d.target_rms)
         << " %)\n";
@@ -121,6 +124,7 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
     o << "\nWhat remains (residual of the extended model):\n";
     sig_text(o, d.after);
   }
+  o << ctx.extra_text;
   o << "\ndiagnosis took " << fmt("%.2f", d.seconds) << " s\n";
   return o.str();
 }
