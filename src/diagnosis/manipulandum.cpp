@@ -6,7 +6,9 @@
 #include <sstream>
 
 #include "manip/common/errors.hpp"
-#include "manip/estimation/session_estimator.hpp"
+#include "manip/estimation/methods/method.hpp"
+#include "manip/estimation/methods/registry.hpp"
+#include "manip/estimation/pem.hpp"
 #include "manip/estimation/variational.hpp"
 #include "manip/model/arm.hpp"
 
@@ -14,6 +16,76 @@ namespace manip::diagnosis {
 
 using Eigen::Matrix2d;
 using Eigen::Vector2d;
+
+namespace {
+
+// Per-trial nuisance polynomial (variable projection, Frisch-Waugh-Lovell):
+// what the high-pass isolation leaves of the unperturbed movement in the
+// window is smooth, p(t); it enters eq. 14 as −(M p̈ + (D + D_adm) ṗ + K p),
+// a polynomial of the same order when p is one. Including a polynomial per
+// trial and axis is the same as projecting it out of the target and of every
+// column of that segment, which also holds for held-out trials (their
+// polynomial is the trial's own nuisance, not a shared parameter). The `oe`
+// method absorbs the unperturbed movement the same way (docs/estimator.md).
+class Projector {
+ public:
+  Projector(std::size_t n, int order, double dt) {
+    if (order < 0) return;
+    Eigen::MatrixXd P(static_cast<Eigen::Index>(n), order + 1);
+    const double T = static_cast<double>(n - 1) * dt;
+    for (std::size_t k = 0; k < n; ++k) {
+      const double x = 2.0 * static_cast<double>(k) * dt / T - 1.0;  // [-1, 1]: well conditioned
+      double v = 1.0;
+      for (int j = 0; j <= order; ++j, v *= x) P(static_cast<Eigen::Index>(k), j) = v;
+    }
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(P);
+    q_ = qr.householderQ() * Eigen::MatrixXd::Identity(P.rows(), P.cols());
+  }
+  void apply(std::vector<double>& v) const {
+    if (q_.size() == 0 || static_cast<Eigen::Index>(v.size()) != q_.rows()) return;
+    Eigen::Map<Eigen::VectorXd> m(v.data(), static_cast<Eigen::Index>(v.size()));
+    const Eigen::VectorXd c = q_.transpose() * m;
+    m -= q_ * c;
+  }
+
+ private:
+  Eigen::MatrixXd q_;
+};
+
+// A mechanism whose columns are projected like the dataset (see Projector).
+class Projected final : public Mechanism {
+ public:
+  Projected(std::unique_ptr<Mechanism> inner, int order) : inner_(std::move(inner)), order_(order) {}
+  std::string id() const override { return inner_->id(); }
+  std::string title() const override { return inner_->title(); }
+  std::string signature() const override { return inner_->signature(); }
+  std::string not_applicable(const Dataset& d) const override { return inner_->not_applicable(d); }
+  std::vector<ParamInfo> shape_params() const override { return inner_->shape_params(); }
+  std::vector<ParamInfo> gains() const override { return inner_->gains(); }
+  std::vector<std::vector<double>> grid(const Dataset& d) const override { return inner_->grid(d); }
+  std::size_t history_samples(const Dataset& d) const override { return inner_->history_samples(d); }
+  int main_param() const override { return inner_->main_param(); }
+  Columns columns(const Dataset& d, std::span<const double> s) const override {
+    auto c = inner_->columns(d, s);
+    if (order_ < 0 || c.empty()) return c;
+    const Projector pr(d.segments.front().y.size(), order_, d.dt_s);
+    for (auto& seg : c)
+      for (auto& col : seg) pr.apply(col);
+    return c;
+  }
+  [[nodiscard]] const Mechanism& inner() const { return *inner_; }
+
+ private:
+  std::unique_ptr<Mechanism> inner_;
+  int order_;
+};
+
+const Mechanism& unprojected(const Mechanism& m) {
+  const auto* p = dynamic_cast<const Projected*>(&m);
+  return p ? p->inner() : m;
+}
+
+}  // namespace
 
 LogCollector::LogCollector(CollectedSession& out)
     : out_(out), asmb_([this](const estimation::SessionInfo&, estimation::TrialData&& t) {
@@ -133,11 +205,12 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
   d.pos_ref = 0.0;
   for (std::size_t i = 0; i < sessions.size(); ++i) d.source += (i ? ", " : "") + sessions[i].name;
 
-  estimation::EstimatorSettings es = opt.estimator;
-  es.methods = {estimation::default_method()};
-  std::unique_ptr<estimation::SessionEstimator> est;
-  if (opt.pem_baseline) est = std::make_unique<estimation::SessionEstimator>(es);
-
+  out.info = info0;
+  out.settings = opt.estimator;
+  out.settings.methods = {estimation::default_method()};
+  const estimation::Method* method = estimation::find_method(out.settings.methods[0]);
+  const bool want_oe = method && estimation::needs(method->windows(), estimation::DataWindow::output_error);
+  const bool want_pw = method && estimation::needs(method->windows(), estimation::DataWindow::prediction_error);
   for (auto& ses : sessions) {
     out.logs.push_back(ses.name);
     out.n_trials += ses.n_trials;
@@ -157,7 +230,11 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
         const auto m_bsp = arm.endpoint_inertia_at(t.x_m.at(on));
         if (!m_bsp) throw std::invalid_argument("onset position out of the arm's reach");
         p.m_bsp = *m_bsp;
-        const auto vw = estimation::isolate_variational(ses.info, t, opt.estimator.pipeline);
+        auto vw = estimation::isolate_variational(ses.info, t, opt.estimator.pipeline);
+        if (opt.pem_baseline) {
+          if (want_oe) out.oe.push_back(estimation::make_oe_window(ses.info, t, *m_bsp, out.settings.oe));
+          if (want_pw) out.pw.push_back(estimation::make_pem_window(ses.info, t, *m_bsp, out.settings.pem));
+        }
         p.dx = vw.dx;
         p.dxd = vw.dxd;
         p.dxdd = vw.dxdd;
@@ -174,6 +251,10 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
           const std::size_t lo = i > 0 ? i - 1 : i, hi = std::min(i + 1, t.u_pert_n.size() - 1);
           p.u_pert_rate[k] = (t.u_pert_n[hi] - t.u_pert_n[lo]) / (static_cast<double>(hi - lo) * d.dt_s);
           p.xd_stage[k] = t.xd_ref_m.at(i);
+        }
+        if (opt.pem_baseline) {
+          out.vw.push_back(std::move(vw));
+          out.m_bsp.push_back(*m_bsp);
         }
       } catch (const std::exception& e) {
         out.excluded.push_back(ses.name + ": trial " + std::to_string(t.trial) + ": " + e.what());
@@ -203,12 +284,16 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
           for (int c = 0; c < 7; ++c) s.base[static_cast<std::size_t>(c)][k] = row[c];
         }
         s.pos_raw = s.pos;
+        if (opt.nuisance_order >= 0) {
+          const Projector pr(n, opt.nuisance_order, d.dt_s);
+          pr.apply(s.y);
+          for (auto& c : s.base) pr.apply(c);
+        }
         s.first = 0;
         s.last = n;
         d.segments.push_back(std::move(s));
       }
       d.planar.push_back(std::move(p));
-      if (est) est->add_trial(ses.info, std::move(t));
     }
     ses.perturbed.clear();
   }
@@ -218,24 +303,83 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
                      " (of " + std::to_string(out.n_perturbed) + " perturbed): the " + std::to_string(folds) +
                      "-fold cross-validation over trials needs at least " + std::to_string(folds) +
                      " (e.g. manip_sim --movements 100 gives 24)");
-  if (est) {
-    try {
-      const auto rep = est->finish({}, {});
-      for (const auto& sm : rep.summaries)
-        if (sm.method == es.methods[0] && sm.group.is_session()) {
-          out.pem.available = true;
-          out.pem.method = sm.method;
-          out.pem.d = sm.d_nspm;
-          out.pem.k = sm.k_npm;
-          out.pem.d_lo = sm.d_lo;
-          out.pem.d_hi = sm.d_hi;
-          out.pem.k_lo = sm.k_lo;
-          out.pem.k_hi = sm.k_hi;
+  if (opt.pem_baseline) out.pem = fit_default_method(out);
+  return out;
+}
+
+PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std::vector<Vector2d>>* correction) {
+  PemBaseline r;
+  r.method = prep.settings.methods.empty() ? estimation::default_method() : prep.settings.methods[0];
+  const estimation::Method* m = estimation::find_method(r.method);
+  if (!m) {
+    r.error = "method " + r.method + " not registered";
+    return r;
+  }
+  auto oe = prep.oe;
+  auto pw = prep.pw;
+  if (correction) {
+    auto apply = [&](std::vector<estimation::OeWindow>& ws) {
+      for (std::size_t i = 0; i < ws.size() && i < correction->size(); ++i) {
+        auto& w = ws[i];
+        const auto& c = (*correction)[i];
+        for (std::size_t k = 0; k < c.size(); ++k) {
+          const auto j = static_cast<std::size_t>(w.onset_offset) + k;
+          if (j < w.u_n.size()) w.u_n[j] -= c[k];
         }
-      if (!out.pem.available) out.pem.error = "no pooled fit (" + (rep.warnings.empty() ? std::string("no reason given") : rep.warnings.back()) + ")";
-    } catch (const std::exception& e) {
-      out.pem.error = e.what();
-    }
+      }
+    };
+    apply(oe);
+    apply(pw);
+  }
+  estimation::SessionWindows sw;
+  sw.info = &prep.info;
+  sw.settings = &prep.settings;
+  sw.variational = prep.vw;
+  sw.m_bsp = prep.m_bsp;
+  sw.output_error = oe;
+  sw.prediction_error = pw;
+  std::vector<std::size_t> idx(prep.vw.size());
+  for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
+  try {
+    const auto e = m->fit(sw, {idx, nullptr});
+    r.available = true;
+    r.d = e.d_nspm;
+    r.k = e.k_npm;
+    r.d_lo = e.d_nspm - e.ci_factor * e.d_se;
+    r.d_hi = e.d_nspm + e.ci_factor * e.d_se;
+    r.k_lo = e.k_npm - e.ci_factor * e.k_se;
+    r.k_hi = e.k_npm + e.ci_factor * e.k_se;
+  } catch (const std::exception& ex) {
+    r.error = ex.what();
+  }
+  return r;
+}
+
+std::vector<std::vector<Vector2d>> extension_correction(const Dataset& d, const Diagnosis& dg,
+                                                       const std::vector<std::unique_ptr<Mechanism>>& lib) {
+  std::vector<Columns> cols;
+  for (std::size_t a = 0; a < dg.accepted.size(); ++a)
+    for (const auto& m : lib)
+      if (m->id() == dg.accepted[a]) cols.push_back(m->columns(d, dg.accepted_settings[a]));
+  std::vector<const Columns*> ext;
+  for (const auto& c : cols) ext.push_back(&c);
+  const auto f = fit_full(d, ext);
+  // The gains come from the fit of the (projected) dataset; the correction of
+  // u_pert is built from the mechanisms' own, unprojected columns.
+  std::vector<Columns> raw;
+  for (std::size_t a = 0; a < dg.accepted.size(); ++a)
+    for (const auto& m : lib)
+      if (m->id() == dg.accepted[a]) raw.push_back(unprojected(*m).columns(d, dg.accepted_settings[a]));
+  std::vector<std::vector<Vector2d>> out(d.planar.size());
+  for (std::size_t i = 0; i < d.planar.size(); ++i) out[i].assign(d.planar[i].dx.size(), Vector2d::Zero());
+  for (std::size_t s = 0; s < d.segments.size(); ++s) {
+    const auto& g = d.segments[s];
+    auto c = static_cast<Eigen::Index>(d.n_base());
+    for (const auto& cc : raw)
+      for (const auto& col : cc[s]) {
+        const double th = f.theta(c++);
+        for (std::size_t k = 0; k < col.size(); ++k) out[static_cast<std::size_t>(g.planar)][k](g.axis) += th * col[k];
+      }
   }
   return out;
 }
@@ -395,7 +539,9 @@ class PlanarReflex final : public Mechanism {
   }
   std::string not_applicable(const Dataset& d) const override { return planar_only(d); }
   // Shoulder/elbow short-latency stretch reflex: EMG latency 20-45 ms, force
-  // ~10 ms later (Lee & Tatton 1975; Pruszynski & Scott 2012); 10-60 ms.
+  // ~10 ms later (Lee & Tatton 1975; Pruszynski & Scott 2012): 20-60 ms. A
+  // shorter delay makes the delayed columns a finite difference of the
+  // baseline's (Δx(t−τ) ≈ Δx − τΔẋ) that fits any smooth model error.
   std::vector<ParamInfo> shape_params() const override { return {{"delay", "s", kLo, kHi}}; }
   std::vector<ParamInfo> gains() const override {
     return {{"Dr11", "N s/m", -50, 50}, {"Dr12", "N s/m", -50, 50}, {"Dr21", "N s/m", -50, 50}, {"Dr22", "N s/m", -50, 50},
@@ -419,7 +565,7 @@ class PlanarReflex final : public Mechanism {
   }
 
  private:
-  static constexpr double kLo = 0.010, kHi = 0.060;
+  static constexpr double kLo = 0.020, kHi = 0.060;
 };
 
 // Stiffness changing linearly within the window: K(t) = K + K' (t/T − 1/2).
@@ -448,6 +594,13 @@ class TimeVaryingStiffness final : public Mechanism {
 };
 
 }  // namespace
+
+std::vector<std::unique_ptr<Mechanism>> planar_library(int nuisance_order) {
+  auto v = planar_library();
+  if (nuisance_order < 0) return v;
+  for (auto& m : v) m = std::make_unique<Projected>(std::move(m), nuisance_order);
+  return v;
+}
 
 std::vector<std::unique_ptr<Mechanism>> planar_library() {
   std::vector<std::unique_ptr<Mechanism>> v;
@@ -623,6 +776,9 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
     o << "  estimator's default (" << prep.pem.method << ", its noise model, no extension): D " << mat(prep.pem.d) << "  K " << mat(prep.pem.k) << "\n";
   else if (!prep.pem.error.empty())
     o << "  estimator's default method: not available (" << prep.pem.error << ")\n";
+  if (dg.misfit_found() && prep.pem_extended.available)
+    o << "  default refitted with the extension (u_pert corrected by the accepted terms, their gains from above): D " << mat(prep.pem_extended.d)
+      << "  K " << mat(prep.pem_extended.k) << "\n";
   const auto edges = default_window_edges(prep.t_est_s);
   const auto wm = window_misfit(prep.data, dg, lib, edges);
   o << "\nMisfit per time window after onset (full-data fits; RMS over both axes; mean residual per axis):\n";
@@ -684,6 +840,14 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
                                 {"K_ci95_hi", jmat(prep.pem.k_hi)}};
   else
     r.json["default_method"] = {{"error", prep.pem.error}};
+  if (dg.misfit_found() && prep.pem_extended.available)
+    r.json["default_method_extended"] = {{"method", prep.pem_extended.method},
+                                         {"D_Nspm", jmat(prep.pem_extended.d)},
+                                         {"K_Npm", jmat(prep.pem_extended.k)},
+                                         {"D_ci95_lo", jmat(prep.pem_extended.d_lo)},
+                                         {"D_ci95_hi", jmat(prep.pem_extended.d_hi)},
+                                         {"K_ci95_lo", jmat(prep.pem_extended.k_lo)},
+                                         {"K_ci95_hi", jmat(prep.pem_extended.k_hi)}};
   return r;
 }
 

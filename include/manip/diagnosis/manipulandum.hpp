@@ -68,6 +68,10 @@ class LogCollector final : public logging::SessionHandler {
 struct PlanarOptions {
   estimation::EstimatorSettings estimator{};  // pipeline (SG, high-pass, T_est) and pem settings as estimate_impedance's defaults
   bool pem_baseline = true;  // also fit the estimator's default method (pem) for the report
+  // Order of the per-trial, per-axis nuisance polynomial projected out of the
+  // target and every column (the unperturbed movement the high-pass leaves in
+  // the window; -1: none). 3, like the `oe` method's cubic.
+  int nuisance_order = 3;
 };
 
 // The estimator's default method fitted on the same trials (for the report).
@@ -81,13 +85,35 @@ struct PemBaseline {
 
 struct PlanarPrepared {
   Dataset data;
+  // For the estimator's default method (through the method registry), per
+  // used trial in the order of data.planar.
+  estimation::SessionInfo info;
+  estimation::EstimatorSettings settings;
+  std::vector<estimation::VariationalWindow> vw;
+  std::vector<Eigen::Matrix2d> m_bsp;
+  std::vector<estimation::OeWindow> oe, pw;
   std::vector<std::string> logs;
   int n_trials = 0, n_perturbed = 0;
   std::vector<std::string> excluded;  // "log: trial k: reason"
-  PemBaseline pem;
+  PemBaseline pem;          // default method, no extension
+  PemBaseline pem_extended; // default method refitted with the accepted extension (filled by the app/tests)
   double t_est_s = 0.0;
   int sg_window = 0;
 };
+
+// The estimator's default method (method registry) on the used trials, its
+// noise model included; with `correction` (per used trial, per sample of the
+// window [onset, onset + T_est]) the perturbation force it is given becomes
+// u_pert − correction: an extension that is linear in the variational signals
+// (delayed u_pert, friction force, curl, handle mass, reflex) moved to the
+// input side with the gains of the equation-error fit.
+[[nodiscard]] PemBaseline fit_default_method(const PlanarPrepared& prep,
+                                             const std::vector<std::vector<Eigen::Vector2d>>* correction = nullptr);
+
+// The extended model's correction of u_pert per used trial: Σ gain × column
+// over the accepted mechanisms, gains from the full-data equation-error fit.
+[[nodiscard]] std::vector<std::vector<Eigen::Vector2d>> extension_correction(const Dataset& d, const Diagnosis& dg,
+                                                                            const std::vector<std::unique_ptr<Mechanism>>& lib);
 
 // Refuses (InputError, exit 4) logs whose session configurations differ
 // (names both logs and the first differing field), never pools them; and
@@ -100,6 +126,9 @@ struct PlanarPrepared {
 
 // The manipulandum's mechanism library (docs/diagnosis.md lists signatures and bounds).
 [[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library();
+// The same, each mechanism's columns projected like a dataset prepared with
+// PlanarOptions::nuisance_order (use the same order).
+[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(int nuisance_order);
 
 // D and K from a planar fit's parameter vector (first 7 entries: D11 D12 D21
 // D22 K11 K12 K22) plus the accepted mechanisms' corrections that belong to
