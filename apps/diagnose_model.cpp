@@ -31,8 +31,10 @@ int run(int argc, char** argv) {
   app.add_option("--single-joint", single_joint, "single-joint position-perturbation record (CSV: docs/diagnosis.md)");
   app.add_option("logs", logs, "manipulandum session logs (.lcm) of manip_rt or manip_sim; several logs are pooled only if their configurations agree");
   bool no_pem = false;
-  int poly_order = 3;
-  app.add_option("--poly-order", poly_order, "manipulandum: per-trial nuisance polynomial projected out (-1 none; default 3, like oe)")->check(CLI::Range(-1, 8));
+  int poly_order = 1;
+  bool time_varying = false;
+  app.add_flag("--time-varying", time_varying, "manipulandum: add the time-varying-stiffness mechanism to the library (off by default: confounded with inertia terms in a 150 ms window)");
+  app.add_option("--poly-order", poly_order, "manipulandum: per-trial nuisance polynomial projected out (-1 none; default 1)")->check(CLI::Range(-1, 8));
   double t_est = 0.15;
   app.add_flag("--no-default-method", no_pem, "manipulandum: do not fit the estimator's default method (pem) for comparison");
   app.add_option("--t-est", t_est, "manipulandum: estimation window after onset (s), as estimate_impedance")->check(CLI::Range(0.05, 1.0));
@@ -78,7 +80,9 @@ int run(int argc, char** argv) {
     po.nuisance_order = poly_order;
     if (eo.progress) eo.progress("isolating the variational signals (eq. 21)" + std::string(no_pem ? "" : " and fitting the default method"));
     auto prep = diagnosis::prepare_planar(sessions, po, eo.folds);
-    const auto lib = diagnosis::planar_library(po.nuisance_order);
+    const auto lib = diagnosis::planar_library(po.nuisance_order, time_varying);
+    eo.require_plausible = true;
+    eo.rank_by_t = true;
     const auto res = diagnosis::diagnose(prep.data, lib, eo);
     if (res.misfit_found() && po.pem_baseline) {
       if (eo.progress) eo.progress("refitting the default method with the extension");

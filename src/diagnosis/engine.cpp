@@ -591,9 +591,13 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       auto& c = rd.candidates[where[j]];
       c.p_holm = adj[j];
       c.significant = adj[j] < opt.alpha && c.test.mean > 0;
-      if (c.significant && (winner < 0 || c.test.mean > best_gain)) {
+      if (opt.require_plausible)
+        for (const auto& pp : c.params)
+          if (!pp.plausible() || pp.at_edge()) c.implausible = true;
+      const double score = opt.rank_by_t ? c.test.t : c.test.mean;
+      if (c.significant && !c.implausible && (winner < 0 || score > best_gain)) {
         winner = static_cast<int>(where[j]);
-        best_gain = c.test.mean;
+        best_gain = score;
         winner_c = j;
       }
     }

@@ -85,7 +85,10 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
         continue;
       }
       o << "gain " << fmt("%+.4f", c.test.mean) << " +- " << fmt("%.4f", c.test.se) << "  p_holm " << fmt("%.2g", c.p_holm)
-        << (static_cast<int>(i) == d.rounds[r].accepted ? "  <- ACCEPTED" : (c.significant ? "  significant" : "")) << "  (";
+        << (static_cast<int>(i) == d.rounds[r].accepted ? "  <- ACCEPTED"
+                                                        : (c.significant ? (c.implausible ? "  significant, IMPLAUSIBLE parameters (not accepted)" : "  significant")
+                                                                         : (c.implausible ? "  implausible parameters" : "")))
+        << "  (";
       for (std::size_t k = 0; k < c.params.size(); ++k) o << (k ? ", " : "") << c.params[k].name << " " << g4(c.params[k].est.value);
       o << ")\n";
     }
@@ -161,6 +164,7 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
         jc["p"] = c.test.p_value;
         jc["p_holm"] = c.p_holm;
         jc["significant"] = c.significant;
+        jc["implausible"] = c.implausible;
         for (const auto& p : c.params) jc["params"][p.name] = p.est.value;
       }
       jr["candidates"].push_back(jc);

@@ -68,6 +68,8 @@ Outcome run_case(const Case& c) {
   if (const char* ord = std::getenv("MANIP_MSTUDY_ORDER")) po.nuisance_order = std::atoi(ord);
   EngineOptions eo;
   eo.bootstrap = c.bootstrap;
+  eo.require_plausible = true;
+    eo.rank_by_t = true;
   auto prep = prepare_planar(ses, po, eo.folds);
   const auto lib = planar_library(po.nuisance_order);
   o.dg = diagnose(prep.data, lib, eo);

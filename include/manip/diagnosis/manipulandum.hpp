@@ -70,8 +70,10 @@ struct PlanarOptions {
   bool pem_baseline = true;  // also fit the estimator's default method (pem) for the report
   // Order of the per-trial, per-axis nuisance polynomial projected out of the
   // target and every column (the unperturbed movement the high-pass leaves in
-  // the window; -1: none). 3, like the `oe` method's cubic.
-  int nuisance_order = 3;
+  // the window; -1: none). 1 (offset and slope): measured against 0 and 3 on
+  // hidden sessions (docs/diagnosis.md); a cubic removes most of the
+  // perturbation response itself from a 150 ms window.
+  int nuisance_order = 1;
 };
 
 // The estimator's default method fitted on the same trials (for the report).
@@ -125,10 +127,10 @@ struct PlanarPrepared {
 [[nodiscard]] std::string configuration_difference(const estimation::SessionInfo& a, const estimation::SessionInfo& b);
 
 // The manipulandum's mechanism library (docs/diagnosis.md lists signatures and bounds).
-[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library();
+[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(bool with_time_varying = false);
 // The same, each mechanism's columns projected like a dataset prepared with
 // PlanarOptions::nuisance_order (use the same order).
-[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(int nuisance_order);
+[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(int nuisance_order, bool with_time_varying = false);
 
 // D and K from a planar fit's parameter vector (first 7 entries: D11 D12 D21
 // D22 K11 K12 K22) plus the accepted mechanisms' corrections that belong to
