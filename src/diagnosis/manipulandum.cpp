@@ -349,9 +349,61 @@ PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std
     r.d_hi = e.d_nspm + e.ci_factor * e.d_se;
     r.k_lo = e.k_npm - e.ci_factor * e.k_se;
     r.k_hi = e.k_npm + e.ci_factor * e.k_se;
+    if (e.disturbance) {
+      r.has_likelihood = true;
+      r.neg_log_likelihood = e.disturbance->neg_log_likelihood;
+    }
   } catch (const std::exception& ex) {
     r.error = ex.what();
   }
+  return r;
+}
+
+RefinedExtension refine_with_default_method(const PlanarPrepared& prep, const std::vector<std::vector<Vector2d>>& correction,
+                                            const std::function<void(const std::string&)>& progress) {
+  RefinedExtension r;
+  auto eval = [&](double alpha) {
+    std::vector<std::vector<Vector2d>> c = correction;
+    for (auto& t : c)
+      for (auto& v : t) v *= alpha;
+    ++r.evaluations;
+    return fit_default_method(prep, &c);
+  };
+  const auto f1 = eval(1.0);
+  if (!f1.available || !f1.has_likelihood || !prep.pem.has_likelihood) {
+    r.fit = f1;
+    return r;
+  }
+  r.nll_baseline = prep.pem.neg_log_likelihood;
+  r.nll_alpha1 = f1.neg_log_likelihood;
+  // The correction enters the model's input linearly, so with D, K (and the
+  // noise model) re-fitted the negative log-likelihood is close to a
+  // parabola in α: successive parabolic interpolation through the three best
+  // points (α = 0 is the plain fit, already done), two steps, α in [0, 3].
+  auto nll = [](const PemBaseline& p) { return p.available && p.has_likelihood ? p.neg_log_likelihood : 1e300; };
+  std::vector<std::pair<double, PemBaseline>> pts = {{0.0, prep.pem}, {1.0, f1}};
+  pts.emplace_back(2.0, eval(2.0));
+  for (int step = 0; step < 2; ++step) {
+    if (progress) progress("refining the extension's amplitude by the default method's likelihood (step " + std::to_string(step + 1) + " of 2)");
+    std::sort(pts.begin(), pts.end(), [&](const auto& x, const auto& y) { return nll(x.second) < nll(y.second); });
+    const double xa = pts[0].first, xb = pts[1].first, xc = pts[2].first;
+    const double fa = nll(pts[0].second), fb = nll(pts[1].second), fc = nll(pts[2].second);
+    // Vertex of the parabola through (xa, fa), (xb, fb), (xc, fc).
+    const double num = (xb - xa) * (xb - xa) * (fb - fc) - (xb - xc) * (xb - xc) * (fb - fa);
+    const double den = (xb - xa) * (fb - fc) - (xb - xc) * (fb - fa);
+    double xn = std::fabs(den) > 0 ? xb - 0.5 * num / den : xa;
+    if (!std::isfinite(xn)) xn = xa;
+    xn = std::clamp(xn, 0.0, 3.0);
+    bool seen = false;
+    for (const auto& p : pts) seen = seen || std::fabs(p.first - xn) < 1e-3;
+    if (seen) break;
+    pts.emplace_back(xn, eval(xn));
+  }
+  std::sort(pts.begin(), pts.end(), [&](const auto& x, const auto& y) { return nll(x.second) < nll(y.second); });
+  r.available = true;
+  r.alpha = pts[0].first;
+  r.fit = pts[0].second;
+  r.nll_best = nll(r.fit);
   return r;
 }
 
@@ -783,6 +835,20 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
   if (dg.misfit_found() && prep.pem_extended.available)
     o << "  default refitted with the extension (u_pert corrected by the accepted terms, their gains from above): D " << mat(prep.pem_extended.d)
       << "  K " << mat(prep.pem_extended.k) << "\n";
+  if (dg.misfit_found() && prep.refined.available) {
+    o << "  default refitted with the extension's amplitude refined by its likelihood (gains x " << f4(prep.refined.alpha)
+      << "; -log L " << f4(prep.refined.nll_baseline) << " without, " << f4(prep.refined.nll_alpha1) << " at x1, " << f4(prep.refined.nll_best)
+      << " at the optimum): D " << mat(prep.refined.fit.d) << "  K " << mat(prep.refined.fit.k) << "   <- the corrected estimate\n";
+    for (const auto& a : dg.accepted)
+      for (const auto& p : dg.final_params)
+        if (p.has_bounds && !p.shape && std::find_if(lib.begin(), lib.end(), [&](const auto& m) {
+              if (m->id() != a) return false;
+              for (const auto& gi : m->gains())
+                if (gi.name == p.name) return true;
+              return false;
+            }) != lib.end())
+          o << "    " << a << ": " << p.name << " = " << f4(p.est.value * prep.refined.alpha) << " " << p.unit << " (refined by the likelihood)\n";
+  }
   const auto edges = default_window_edges(prep.t_est_s);
   const auto wm = window_misfit(prep.data, dg, lib, edges);
   o << "\nMisfit per time window after onset (full-data fits; RMS over both axes; mean residual per axis):\n";
@@ -844,6 +910,17 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
                                 {"K_ci95_hi", jmat(prep.pem.k_hi)}};
   else
     r.json["default_method"] = {{"error", prep.pem.error}};
+  if (dg.misfit_found() && prep.refined.available)
+    r.json["default_method_refined"] = {{"alpha", prep.refined.alpha},
+                                        {"nll_baseline", prep.refined.nll_baseline},
+                                        {"nll_alpha1", prep.refined.nll_alpha1},
+                                        {"nll_best", prep.refined.nll_best},
+                                        {"D_Nspm", jmat(prep.refined.fit.d)},
+                                        {"K_Npm", jmat(prep.refined.fit.k)},
+                                        {"D_ci95_lo", jmat(prep.refined.fit.d_lo)},
+                                        {"D_ci95_hi", jmat(prep.refined.fit.d_hi)},
+                                        {"K_ci95_lo", jmat(prep.refined.fit.k_lo)},
+                                        {"K_ci95_hi", jmat(prep.refined.fit.k_hi)}};
   if (dg.misfit_found() && prep.pem_extended.available)
     r.json["default_method_extended"] = {{"method", prep.pem_extended.method},
                                          {"D_Nspm", jmat(prep.pem_extended.d)},

@@ -26,7 +26,8 @@ namespace {
 struct Outcome {
   Diagnosis dg;
   PlanarImpedance ee_final;
-  PemBaseline pem, pem_ext;
+  PemBaseline pem, pem_ext, alpha1;  // pem_ext: refined amplitude (the corrected estimate); alpha1: EE gains
+  double alpha = 1.0;
   Matrix2d d_app{Matrix2d::Zero()}, k_app{Matrix2d::Zero()};      // apparent truth (sim/truth.hpp)
   Matrix2d d_intr{Matrix2d::Zero()}, k_intr{Matrix2d::Zero()};    // the person's intrinsic D, K (scaled by the draw)
   sim::HiddenDraw draw;
@@ -77,7 +78,10 @@ Outcome run_case(const Case& c) {
   o.pem = prep.pem;
   if (o.dg.misfit_found()) {
     const auto corr = extension_correction(prep.data, o.dg, lib);
-    o.pem_ext = fit_default_method(prep, &corr);
+    o.alpha1 = fit_default_method(prep, &corr);
+    const auto rf = refine_with_default_method(prep, corr);
+    o.pem_ext = rf.fit;
+    o.alpha = rf.alpha;
   } else {
     o.pem_ext = prep.pem;
   }

@@ -15,6 +15,7 @@
 //
 // Truth channels (MANIP_TRUTH_STATE, MANIP_TRUTH_IMPEDANCE) are never read:
 // LogCollector drops them before the assembler sees the stream.
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -83,8 +84,22 @@ struct PemBaseline {
   Eigen::Matrix2d d = Eigen::Matrix2d::Zero(), k = Eigen::Matrix2d::Zero();
   Eigen::Matrix2d d_lo = Eigen::Matrix2d::Zero(), d_hi = Eigen::Matrix2d::Zero();
   Eigen::Matrix2d k_lo = Eigen::Matrix2d::Zero(), k_hi = Eigen::Matrix2d::Zero();
+  double neg_log_likelihood = 0.0;  // pem only (0 otherwise)
+  bool has_likelihood = false;
 };
 
+// The extension's amplitude refined by the default method's likelihood: the
+// correction u_pert − α C (C from the equation-error gains) with α chosen by
+// golden-section search on [0, 2] for the smallest negative log-likelihood
+// of the default method (pem: the exact Gaussian likelihood of the raw
+// positions, its noise model included). α = 1 keeps the equation-error gains.
+struct RefinedExtension {
+  bool available = false;
+  double alpha = 1.0;
+  double nll_baseline = 0.0, nll_alpha1 = 0.0, nll_best = 0.0;
+  int evaluations = 0;
+  PemBaseline fit;  // the default method at α
+};
 struct PlanarPrepared {
   Dataset data;
   // For the estimator's default method (through the method registry), per
@@ -99,9 +114,14 @@ struct PlanarPrepared {
   std::vector<std::string> excluded;  // "log: trial k: reason"
   PemBaseline pem;          // default method, no extension
   PemBaseline pem_extended; // default method refitted with the accepted extension (filled by the app/tests)
+  RefinedExtension refined; // ... with its amplitude refined by the likelihood (filled by the app/tests)
   double t_est_s = 0.0;
   int sg_window = 0;
 };
+
+[[nodiscard]] RefinedExtension refine_with_default_method(const PlanarPrepared& prep,
+                                                          const std::vector<std::vector<Eigen::Vector2d>>& correction,
+                                                          const std::function<void(const std::string&)>& progress = {});
 
 // The estimator's default method (method registry) on the used trials, its
 // noise model included; with `correction` (per used trial, per sample of the
