@@ -88,7 +88,7 @@ int run(int argc, char** argv) {
       if (eo.progress) eo.progress("refitting the default method with the extension");
       const auto corr = diagnosis::extension_correction(prep.data, res, lib);
       prep.pem_extended = diagnosis::fit_default_method(prep, &corr);
-      prep.refined = diagnosis::refine_with_default_method(prep, corr, eo.progress);
+      prep.refined = diagnosis::refine_with_default_method(prep, res, lib, eo.progress);
     }
     diagnosis::ReportContext ctx;
     ctx.front_end = "manipulandum session, variational signals of eq. 21";

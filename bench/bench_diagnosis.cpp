@@ -82,7 +82,7 @@ int main(int argc, char** argv) {
     if (dg.misfit_found()) {
       const auto corr = diagnosis::extension_correction(prep.data, dg, lib);
       prep.pem_extended = diagnosis::fit_default_method(prep, &corr);
-      prep.refined = diagnosis::refine_with_default_method(prep, corr);
+      prep.refined = diagnosis::refine_with_default_method(prep, dg, lib);
     }
     const auto rep = diagnosis::planar_report(prep, dg, lib);
     wall.push_back(std::chrono::duration<double>(Clock::now() - t0).count());

@@ -359,13 +359,13 @@ PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std
   return r;
 }
 
-RefinedExtension refine_with_default_method(const PlanarPrepared& prep, const std::vector<std::vector<Vector2d>>& correction,
-                                            const std::function<void(const std::string&)>& progress) {
+namespace {
+RefinedExtension refine_core(const PlanarPrepared& prep,
+                             const std::function<std::vector<std::vector<Vector2d>>(double)>& correction_at,
+                             const std::function<void(const std::string&)>& progress) {
   RefinedExtension r;
   auto eval = [&](double alpha) {
-    std::vector<std::vector<Vector2d>> c = correction;
-    for (auto& t : c)
-      for (auto& v : t) v *= alpha;
+    const auto c = correction_at(alpha);
     ++r.evaluations;
     return fit_default_method(prep, &c);
   };
@@ -406,9 +406,34 @@ RefinedExtension refine_with_default_method(const PlanarPrepared& prep, const st
   r.nll_best = nll(r.fit);
   return r;
 }
+}  // namespace
+
+RefinedExtension refine_with_default_method(const PlanarPrepared& prep, const std::vector<std::vector<Vector2d>>& correction,
+                                            const std::function<void(const std::string&)>& progress) {
+  return refine_core(
+      prep,
+      [&](double alpha) {
+        auto c = correction;
+        for (auto& t : c)
+          for (auto& v : t) v *= alpha;
+        return c;
+      },
+      progress);
+}
+
+RefinedExtension refine_with_default_method(const PlanarPrepared& prep, const Diagnosis& dg,
+                                            const std::vector<std::unique_ptr<Mechanism>>& lib,
+                                            const std::function<void(const std::string&)>& progress) {
+  return refine_core(prep, [&](double alpha) { return extension_correction(prep.data, dg, lib, alpha); }, progress);
+}
 
 std::vector<std::vector<Vector2d>> extension_correction(const Dataset& d, const Diagnosis& dg,
                                                        const std::vector<std::unique_ptr<Mechanism>>& lib) {
+  return extension_correction(d, dg, lib, 1.0);
+}
+
+std::vector<std::vector<Vector2d>> extension_correction(const Dataset& d, const Diagnosis& dg,
+                                                       const std::vector<std::unique_ptr<Mechanism>>& lib, double alpha) {
   std::vector<Columns> cols;
   for (std::size_t a = 0; a < dg.accepted.size(); ++a)
     for (const auto& m : lib)
@@ -417,21 +442,49 @@ std::vector<std::vector<Vector2d>> extension_correction(const Dataset& d, const 
   for (const auto& c : cols) ext.push_back(&c);
   const auto f = fit_full(d, ext);
   // The gains come from the fit of the (projected) dataset; the correction of
-  // u_pert is built from the mechanisms' own, unprojected columns.
-  std::vector<Columns> raw;
-  for (std::size_t a = 0; a < dg.accepted.size(); ++a)
-    for (const auto& m : lib)
-      if (m->id() == dg.accepted[a]) raw.push_back(unprojected(*m).columns(d, dg.accepted_settings[a]));
+  // u_pert is built from the mechanisms' own, unprojected columns, except the
+  // actuation delay, whose correction is exact: u(t) − u(t − α τ) (linear
+  // interpolation between samples; u = 0 before onset), not its first-order
+  // form τ u̇ that the equation-error fit uses.
   std::vector<std::vector<Vector2d>> out(d.planar.size());
   for (std::size_t i = 0; i < d.planar.size(); ++i) out[i].assign(d.planar[i].dx.size(), Vector2d::Zero());
-  for (std::size_t s = 0; s < d.segments.size(); ++s) {
-    const auto& g = d.segments[s];
-    auto c = static_cast<Eigen::Index>(d.n_base());
-    for (const auto& cc : raw)
-      for (const auto& col : cc[s]) {
-        const double th = f.theta(c++);
-        for (std::size_t k = 0; k < col.size(); ++k) out[static_cast<std::size_t>(g.planar)][k](g.axis) += th * col[k];
+  auto c = static_cast<Eigen::Index>(d.n_base());
+  for (std::size_t a = 0; a < dg.accepted.size(); ++a) {
+    const Mechanism* mech = nullptr;
+    for (const auto& m : lib)
+      if (m->id() == dg.accepted[a]) mech = &unprojected(*m);
+    if (!mech) continue;
+    const auto ng = static_cast<Eigen::Index>(mech->gains().size());
+    if (mech->id() == "actuation_delay") {
+      const double tau = alpha * f.theta(c);
+      for (std::size_t i = 0; i < d.planar.size(); ++i) {
+        const auto& u = d.planar[i].u_pert;
+        for (std::size_t k = 0; k < u.size(); ++k) {
+          const double t = static_cast<double>(k) - tau / d.dt_s;  // sample index of t − τ
+          Vector2d ud = Vector2d::Zero();
+          if (t >= 0) {
+            const auto k0 = static_cast<std::size_t>(std::floor(t));
+            const double w = t - static_cast<double>(k0);
+            const Vector2d u0 = u[std::min(k0, u.size() - 1)], u1 = u[std::min(k0 + 1, u.size() - 1)];
+            ud = (1 - w) * u0 + w * u1;
+          } else if (t > -1) {  // between the sample before onset (0) and onset
+            ud = (1 + t) * u[0];
+          }
+          out[i][k] += u[k] - ud;
+        }
       }
+    } else {
+      const auto raw = mech->columns(d, dg.accepted_settings[a]);
+      for (std::size_t s = 0; s < d.segments.size(); ++s) {
+        const auto& g = d.segments[s];
+        for (Eigen::Index j = 0; j < ng; ++j) {
+          const double th = alpha * f.theta(c + j);
+          const auto& col = raw[s][static_cast<std::size_t>(j)];
+          for (std::size_t k = 0; k < col.size(); ++k) out[static_cast<std::size_t>(g.planar)][k](g.axis) += th * col[k];
+        }
+      }
+    }
+    c += ng;
   }
   return out;
 }

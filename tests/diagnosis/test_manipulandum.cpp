@@ -79,7 +79,7 @@ Outcome run_case(const Case& c) {
   if (o.dg.misfit_found()) {
     const auto corr = extension_correction(prep.data, o.dg, lib);
     o.alpha1 = fit_default_method(prep, &corr);
-    const auto rf = refine_with_default_method(prep, corr);
+    const auto rf = refine_with_default_method(prep, o.dg, lib);
     o.pem_ext = rf.fit;
     o.alpha = rf.alpha;
   } else {

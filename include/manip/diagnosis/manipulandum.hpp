@@ -134,8 +134,18 @@ struct PlanarPrepared {
 
 // The extended model's correction of u_pert per used trial: Σ gain × column
 // over the accepted mechanisms, gains from the full-data equation-error fit.
+// With alpha: every gain × alpha (the actuation delay exact: u(t) − u(t − alpha τ)).
+[[nodiscard]] std::vector<std::vector<Eigen::Vector2d>> extension_correction(const Dataset& d, const Diagnosis& dg,
+                                                                            const std::vector<std::unique_ptr<Mechanism>>& lib,
+                                                                            double alpha);
 [[nodiscard]] std::vector<std::vector<Eigen::Vector2d>> extension_correction(const Dataset& d, const Diagnosis& dg,
                                                                             const std::vector<std::unique_ptr<Mechanism>>& lib);
+
+// The same with the correction rebuilt at every α by extension_correction(…, α)
+// (exact actuation delay); the form diagnose_model uses.
+[[nodiscard]] RefinedExtension refine_with_default_method(const PlanarPrepared& prep, const Diagnosis& dg,
+                                                          const std::vector<std::unique_ptr<Mechanism>>& lib,
+                                                          const std::function<void(const std::string&)>& progress = {});
 
 // Refuses (InputError, exit 4) logs whose session configurations differ
 // (names both logs and the first differing field), never pools them; and
