@@ -116,7 +116,7 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
     for (std::size_t a = 0; a < d.accepted.size() && a < d.contribution_rms.size(); ++a)
       o << "    " << d.accepted[a] << ": RMS " << g4(d.contribution_rms[a]) << " (" << fmt("%.1f", 100.0 * d.contribution_rms[a] / d.target_rms)
         << " %)\n";
-    o << "  intrinsic impedance before -> after modelling the cause:\n";
+    if (d.find_baseline("K")) o << "  intrinsic impedance before -> after modelling the cause:\n";
     for (const char* n : {"I", "B", "K"}) {
       const auto* b = d.find_baseline(n);
       const auto* f = d.find_final(n);
