@@ -20,6 +20,23 @@
 #include "manip/sim/presets.hpp"
 #include "manip/version.hpp"
 
+namespace {
+// Passes everything but the truth channels (MANIP_TRUTH_STATE,
+// MANIP_TRUTH_IMPEDANCE): a log as a lab rig would write it (--no-truth).
+class NoTruth final : public manip::logging::SessionHandler {
+ public:
+  explicit NoTruth(manip::logging::SessionHandler& out) : out_(out) {}
+  void on_session(const manip::session_t& m) override { out_.on_session(m); }
+  void on_state(const manip::state_t& m) override { out_.on_state(m); }
+  void on_trial_event(const manip::trial_event_t& m) override { out_.on_trial_event(m); }
+  void on_fault(const manip::fault_t& m) override { out_.on_fault(m); }
+  void on_warning(const std::string& w) override { out_.on_warning(w); }
+
+ private:
+  manip::logging::SessionHandler& out_;
+};
+}  // namespace
+
 int main(int argc, char** argv) {
   using namespace manip::sim;
   namespace exit_code = manip::exit_code;
@@ -32,6 +49,7 @@ int main(int argc, char** argv) {
   std::uint64_t hidden_seed = 1;
   int movements = 100, reps = 3;
   bool force = false;
+  bool no_truth = false;
   app.add_option("-o,--out", out, "output LCM log (default hidden.lcm)");
   app.add_option("--hidden", hidden,
                  "MECHANISM:MAGNITUDE, SI units, repeatable: delay:0.002 (s) | friction:1 (N) | handle:0.3 (kg) | "
@@ -42,6 +60,9 @@ int main(int argc, char** argv) {
   app.add_option("--reps", reps, "perturbed repetitions per angle (default 3)")->check(CLI::Range(1, 1000));
   app.add_option("--key", key, "also write what was hidden (text) to this file");
   app.add_flag("--force", force, "replace existing output files");
+  app.add_flag("--no-truth", no_truth,
+               "leave the truth channels (unperturbed twins, intrinsic and apparent truth) out of the log; the apparent "
+               "truth is still printed on stderr and written to --key");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -76,18 +97,23 @@ int main(int argc, char** argv) {
          << hs.draw.actuation_delay_cycles << " cycles\n";
     // The log: written next to the target and renamed when complete, so an
     // existing file is never truncated (without --force it is refused first).
+    std::string apparent_text;
     manip::AtomicOutput target(out, force);
     const std::string tmp = target.temp_path() + ".lcm";
     {
       manip::logging::LogWritingHandler w(tmp);
-      const auto sum = run_session(hs.design, *hs.person, w);
+      NoTruth filtered(w);
+      const auto sum = no_truth ? run_session(hs.design, *hs.person, filtered) : run_session(hs.design, *hs.person, w);
       w.close();
       std::cerr << "make_hidden_session: " << sum.trials << " movements, " << sum.perturbed << " perturbed\n";
       if (sum.apparent) {  // the truth an estimator should land on (sim/truth.hpp): the hidden person-side effects are in it
         const auto& ap = *sum.apparent;
-        std::cerr << "make_hidden_session: apparent truth: D [" << ap.d_nspm(0, 0) << " " << ap.d_nspm(0, 1) << "; "
-                  << ap.d_nspm(1, 0) << " " << ap.d_nspm(1, 1) << "] N s/m, K [" << ap.k_npm(0, 0) << " "
-                  << ap.k_npm(0, 1) << "; " << ap.k_npm(1, 0) << " " << ap.k_npm(1, 1) << "] N/m\n";
+        std::ostringstream at;
+        at << "apparent truth: D [" << ap.d_nspm(0, 0) << " " << ap.d_nspm(0, 1) << "; " << ap.d_nspm(1, 0) << " "
+           << ap.d_nspm(1, 1) << "] N s/m, K [" << ap.k_npm(0, 0) << " " << ap.k_npm(0, 1) << "; " << ap.k_npm(1, 0)
+           << " " << ap.k_npm(1, 1) << "] N/m\n";
+        std::cerr << "make_hidden_session: " << at.str();
+        apparent_text = at.str();
       }
     }
     // Move the finished log over the temporary AtomicOutput holds, then commit.
@@ -98,7 +124,7 @@ int main(int argc, char** argv) {
       throw manip::OutputError(out + ": cannot be written (" + ec.message() + ")");
     }
     target.commit();
-    if (!key.empty()) manip::write_file_atomically(key, what.str(), force);
+    if (!key.empty()) manip::write_file_atomically(key, what.str() + apparent_text, force);
     std::cerr << "make_hidden_session: wrote " << out << "; " << what.str();
   } catch (const manip::Error& e) {
     std::cerr << "make_hidden_session: " << e.what() << "\n";

@@ -32,6 +32,7 @@ using Eigen::VectorXd;
 struct Block {
   std::size_t seg = 0, begin = 0, end = 0;
   int fold = 0;
+  std::size_t unit = 0;  // resampling unit of the bootstrap (a trial: both axes of a planar trial share it)
 };
 
 // Sufficient statistics of a least-squares problem over some samples.
@@ -350,13 +351,35 @@ std::vector<Block> make_blocks(const Dataset& d, const EngineOptions& opt, std::
   const int K = opt.folds;
   const auto nseg = d.segments.size();
   if (nseg == 0) throw InputError(d.source + ": no data");
-  if (nseg >= static_cast<std::size_t>(K)) {  // segments (trials) are the units; folds group neighbours
+  // Units: a segment's group (planar: the trial, both axes), else the segment itself.
+  std::vector<int> unit_key(nseg);
+  for (std::size_t s = 0; s < nseg; ++s) unit_key[s] = d.segments[s].group >= 0 ? d.segments[s].group : -1 - static_cast<int>(s);
+  std::vector<int> keys(unit_key);
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  const bool grouped = std::any_of(d.segments.begin(), d.segments.end(), [](const Segment& g) { return g.group >= 0; });
+  if (grouped && keys.size() < static_cast<std::size_t>(K))
+    throw InputError(d.source + ": " + std::to_string(keys.size()) + " usable trials: " + std::to_string(K) +
+                     "-fold cross-validation over trials needs at least " + std::to_string(K));
+  if (keys.size() >= static_cast<std::size_t>(K)) {  // segments (trials) are the units; folds group neighbours
+    // Units in order of first appearance (time order), folds of neighbouring units.
+    std::vector<std::size_t> rank(nseg);
+    std::vector<int> order;
+    for (std::size_t s = 0; s < nseg; ++s) {
+      auto it = std::find(order.begin(), order.end(), unit_key[s]);
+      if (it == order.end()) {
+        order.push_back(unit_key[s]);
+        it = order.end() - 1;
+      }
+      rank[s] = static_cast<std::size_t>(it - order.begin());
+    }
+    const std::size_t nu = order.size();
     for (std::size_t s = 0; s < nseg; ++s) {
       const auto& g = d.segments[s];
       if (g.first + history >= g.last)
         throw InputError(d.source + ": segment " + std::to_string(s) + " shorter than the " +
                          std::to_string(static_cast<double>(history) * d.dt_s) + " s of history the mechanisms need");
-      blocks.push_back({s, g.first + history, g.last, static_cast<int>(s * static_cast<std::size_t>(K) / nseg)});
+      blocks.push_back({s, g.first + history, g.last, static_cast<int>(rank[s] * static_cast<std::size_t>(K) / nu), rank[s]});
     }
     return blocks;
   }
@@ -383,15 +406,23 @@ std::vector<Block> make_blocks(const Dataset& d, const EngineOptions& opt, std::
     if (k < K - 1) b -= (guard + 1) / 2;
     const auto m = static_cast<std::size_t>(opt.blocks_per_fold);
     for (std::size_t j = 0; j < m; ++j)
-      blocks.push_back({0, a + (b - a) * j / m, a + (b - a) * (j + 1) / m, k});
+      blocks.push_back({0, a + (b - a) * j / m, a + (b - a) * (j + 1) / m, k, blocks.size()});
   }
   return blocks;
 }
 
-std::vector<std::vector<double>> multinomial_weights(std::size_t nb, int reps, PortableRng& rng) {
-  std::vector<std::vector<double>> w(static_cast<std::size_t>(reps), std::vector<double>(nb, 0.0));
-  for (auto& row : w)
-    for (std::size_t i = 0; i < nb; ++i) row[static_cast<std::size_t>(rng.below(nb))] += 1.0;
+// Bootstrap weights per block: units (blocks, or trials for planar data) drawn
+// with replacement; a block's weight is the count of its unit.
+std::vector<std::vector<double>> multinomial_weights(const std::vector<Block>& blocks, int reps, PortableRng& rng) {
+  std::size_t nu = 0;
+  for (const auto& b : blocks) nu = std::max(nu, b.unit + 1);
+  std::vector<std::vector<double>> w(static_cast<std::size_t>(reps), std::vector<double>(blocks.size(), 0.0));
+  std::vector<double> count(nu);
+  for (auto& row : w) {
+    std::fill(count.begin(), count.end(), 0.0);
+    for (std::size_t i = 0; i < nu; ++i) count[static_cast<std::size_t>(rng.below(nu))] += 1.0;
+    for (std::size_t b = 0; b < blocks.size(); ++b) row[b] = count[blocks[b].unit];
+  }
   return w;
 }
 
@@ -560,9 +591,13 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       auto& c = rd.candidates[where[j]];
       c.p_holm = adj[j];
       c.significant = adj[j] < opt.alpha && c.test.mean > 0;
-      if (c.significant && (winner < 0 || c.test.mean > best_gain)) {
+      if (opt.require_plausible)
+        for (const auto& pp : c.params)
+          if (!pp.plausible() || pp.at_edge()) c.implausible = true;
+      const double score = opt.rank_by_t ? c.test.t : c.test.mean;
+      if (c.significant && !c.implausible && (winner < 0 || score > best_gain)) {
         winner = static_cast<int>(where[j]);
-        best_gain = c.test.mean;
+        best_gain = score;
         winner_c = j;
       }
     }
@@ -615,7 +650,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
 
   // --- parameters with block-bootstrap intervals
   say("block bootstrap (" + std::to_string(opt.bootstrap) + " replicates over " + std::to_string(blocks.size()) + " blocks)");
-  const auto W = multinomial_weights(blocks.size(), opt.bootstrap, rng);
+  const auto W = multinomial_weights(blocks, opt.bootstrap, rng);
   auto weighted = [&](const std::vector<Stats>& bs, const std::vector<double>& w, Eigen::Index p) {
     Stats s;
     s.zero(p);

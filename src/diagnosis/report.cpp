@@ -62,9 +62,12 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
   std::ostringstream o;
   o << "diagnose_model: " << d.source << " (" << ctx.front_end << ")\n";
   if (!ctx.preprocessing.empty()) o << "  " << ctx.preprocessing << "\n";
-  o << "  " << d.n_used << " samples used (" << fmt("%.1f", d.duration_s) << " s), " << d.folds << "-fold cross-validation over contiguous blocks, guard "
-    << fmt("%.2f", d.guard_s) << " s; bootstrap over " << d.blocks << " blocks; intervals are 95 %\n\n";
-  o << "Baseline: torque = I acc + B vel + K (x - x_ref) + c\n";
+  if (ctx.cv_units.empty())
+    o << "  " << d.n_used << " samples used (" << fmt("%.1f", d.duration_s) << " s), " << d.folds << "-fold cross-validation over contiguous blocks, guard "
+      << fmt("%.2f", d.guard_s) << " s; bootstrap over " << d.blocks << " blocks; intervals are 95 %\n\n";
+  else
+    o << "  " << d.n_used << " samples used, " << d.folds << "-fold cross-validation over " << ctx.cv_units << "; intervals are 95 %\n\n";
+  o << "Baseline: " << ctx.baseline_equation << "\n";
   for (const auto& p : d.baseline_params) o << "  " << p.name << " = " << interval(p.est) << " " << p.unit << "\n";
   o << "  held-out VAF " << interval(d.baseline_heldout.vaf) << ", NRMSE " << interval(d.baseline_heldout.nrmse) << "\n";
   o << "  held-out VAF per fold (time order):";
@@ -82,7 +85,10 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
         continue;
       }
       o << "gain " << fmt("%+.4f", c.test.mean) << " +- " << fmt("%.4f", c.test.se) << "  p_holm " << fmt("%.2g", c.p_holm)
-        << (static_cast<int>(i) == d.rounds[r].accepted ? "  <- ACCEPTED" : (c.significant ? "  significant" : "")) << "  (";
+        << (static_cast<int>(i) == d.rounds[r].accepted ? "  <- ACCEPTED"
+                                                        : (c.significant ? (c.implausible ? "  significant, IMPLAUSIBLE parameters (not accepted)" : "  significant")
+                                                                         : (c.implausible ? "  implausible parameters" : "")))
+        << "  (";
       for (std::size_t k = 0; k < c.params.size(); ++k) o << (k ? ", " : "") << c.params[k].name << " " << g4(c.params[k].est.value);
       o << ")\n";
     }
@@ -106,11 +112,11 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
     for (const auto& p : d.final_params)
       o << "    " << p.name << " = " << interval(p.est) << " " << p.unit << (p.plausible() ? "" : "  OUTSIDE plausible range")
         << (p.at_edge() ? "  AT THE EDGE of the search range (" + g4(p.plausible_lo) + "-" + g4(p.plausible_hi) + ")" : "") << "\n";
-    o << "  share of the torque (RMS of the term / RMS of the measured torque " << g4(d.target_rms) << "):\n";
+    o << "  share of the " << ctx.target_word << " (RMS of the term / RMS of the measured " << ctx.target_word << " " << g4(d.target_rms) << "):\n";
     for (std::size_t a = 0; a < d.accepted.size() && a < d.contribution_rms.size(); ++a)
       o << "    " << d.accepted[a] << ": RMS " << g4(d.contribution_rms[a]) << " (" << fmt("%.1f", 100.0 * d.contribution_rms[a] / d.target_rms)
         << " %)\n";
-    o << "  intrinsic impedance before -> after modelling the cause:\n";
+    if (d.find_baseline("K")) o << "  intrinsic impedance before -> after modelling the cause:\n";
     for (const char* n : {"I", "B", "K"}) {
       const auto* b = d.find_baseline(n);
       const auto* f = d.find_final(n);
@@ -121,6 +127,7 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
     o << "\nWhat remains (residual of the extended model):\n";
     sig_text(o, d.after);
   }
+  o << ctx.extra_text;
   o << "\ndiagnosis took " << fmt("%.2f", d.seconds) << " s\n";
   return o.str();
 }
@@ -157,6 +164,7 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
         jc["p"] = c.test.p_value;
         jc["p_holm"] = c.p_holm;
         jc["significant"] = c.significant;
+        jc["implausible"] = c.implausible;
         for (const auto& p : c.params) jc["params"][p.name] = p.est.value;
       }
       jr["candidates"].push_back(jc);

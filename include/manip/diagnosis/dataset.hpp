@@ -20,8 +20,30 @@
 
 namespace manip::diagnosis {
 
+// One perturbed trial of a planar (manipulandum) session over the estimation
+// window [onset, onset + T_est], shoulder frame, as the estimator isolates it
+// (paper §3.1, eq. 21): what the planar mechanisms build their columns from.
+struct PlanarTrial {
+  int trial = -1;
+  std::string log;                          // the session log it came from
+  double angle_rad = 0.0;
+  Eigen::Matrix2d m_bsp = Eigen::Matrix2d::Zero();     // eq. 16 at onset (fixed, as in the estimator)
+  Eigen::Matrix2d ws_to_sh = Eigen::Matrix2d::Identity();  // workspace -> shoulder rotation
+  std::vector<Eigen::Vector2d> dx, dxd, dxdd;          // Δx, Δẋ, Δẍ (high-pass isolated)
+  std::vector<Eigen::Vector2d> du_ext_adm;             // eq. 21
+  std::vector<Eigen::Vector2d> du_ext_force;           // from the force sensor
+  std::vector<Eigen::Vector2d> u_pert, u_pert_rate;    // logged perturbation force and its rate (N, N/s)
+  std::vector<Eigen::Vector2d> xd_stage;               // absolute stage velocity (admittance reference), shoulder frame
+};
+
 struct Segment {
   double t0_s = 0.0;                       // time of sample 0 in the session
+  // Planar datasets: two segments (one equation per workspace axis) per
+  // trial, sharing `group` (the cross-validation and bootstrap unit, so the
+  // two axes of a trial are always in the same fold); -1: each segment its own unit.
+  int group = -1;
+  int axis = -1;                           // 0, 1: row of the 2-D equation (planar only)
+  int planar = -1;                         // index into Dataset::planar
   std::vector<double> y;                   // target (smoothed)
   std::vector<double> pos, vel, acc;       // smoothed kinematics and derivatives
   std::vector<double> pos_raw;             // as recorded (for reports)
@@ -40,7 +62,9 @@ struct Dataset {
   bool inertia_fixed = false;
   double fixed_inertia = 0.0;
   std::vector<Segment> segments;
+  std::vector<PlanarTrial> planar;  // planar (manipulandum) datasets only
 
+  [[nodiscard]] bool is_planar() const { return !planar.empty(); }
   [[nodiscard]] std::size_t n_base() const { return base_names.size(); }
   // Smooths x into y with the dataset's smoother (copy when there is none).
   void smooth(const std::vector<double>& x, std::vector<double>& y) const;

@@ -25,6 +25,17 @@ struct EngineOptions {
   int bootstrap = 200;       // block-bootstrap replicates
   std::uint64_t seed = 20261126;
   std::function<void(const std::string&)> progress;  // one line per step (stderr in the app)
+  // Accept a significant candidate only if its full-data parameters lie within
+  // their plausible ranges (a mechanism must keep its physical meaning; a
+  // flexible one with absurd gains is fitting some other model error).
+  // A shape parameter on the edge of its grid counts as implausible too (the
+  // optimum lies outside the physical range searched).
+  bool require_plausible = false;
+  // Among the significant candidates accept the one with the largest t
+  // statistic of the fold gains (most consistent held-out improvement) instead
+  // of the largest mean gain: a mechanism with many free gains can reach a
+  // mean gain similar to the true one's by fitting a few trials well.
+  bool rank_by_t = false;
 };
 
 struct Interval {
@@ -53,6 +64,7 @@ struct CandidateScore {
   stats::OneSidedT test;
   double p_holm = 1.0;
   bool significant = false;
+  bool implausible = false;  // significant or not: a parameter outside its plausible range (require_plausible)
   std::vector<ParamEstimate> params;  // fitted on all data (no interval)
   std::vector<double> setting;        // chosen shape parameters on all data
 };
