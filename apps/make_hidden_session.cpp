@@ -2,16 +2,20 @@
 // mechanisms (issue 11; include/manip/sim/hidden_effects.hpp), written as an
 // ordinary manip LCM log. The log's session message describes the apparatus as
 // configured; what was hidden is printed on stderr only (and, with
-// --key FILE, written to a separate file), never into the log.
+// --key FILE, written to a separate file), never into the log. Command line:
+// common/cli.hpp (docs/cli.md): --version, -q, -o/--out, --force, the
+// exit-code table in --help.
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "manip/common/cli.hpp"
 #include "manip/common/errors.hpp"
 #include "manip/common/exit_codes.hpp"
 #include "manip/common/output_file.hpp"
@@ -35,45 +39,51 @@ class NoTruth final : public manip::logging::SessionHandler {
  private:
   manip::logging::SessionHandler& out_;
 };
+
+namespace exit_code = manip::exit_code;
+// The rows of the one table (common/exit_codes.hpp) make_hidden_session can return.
+const std::vector<int> kExitCodes = {exit_code::kOk, exit_code::kUsage, exit_code::kOutput, exit_code::kInternal};
+const std::vector<std::string> kNoise = {"none", "quantisation", "motor", "variability", "realistic"};
 }  // namespace
 
 int main(int argc, char** argv) {
   using namespace manip::sim;
-  namespace exit_code = manip::exit_code;
+  namespace cli = manip::cli;
   CLI::App app{"make_hidden_session " + std::string(manip::kVersion) +
-               ": a simulated session (linear Table-1 person, ideal admittance) with hidden mechanisms, as an ordinary "
-               "log.\nExit codes: 0 ok, 2 bad command line, 6 output exists (no --force) or cannot be written, "
-               "70 internal error (docs/exit-codes.md)."};
-  std::string out = "hidden.lcm", key, noise = "realistic";
+                   ": a simulated session (linear Table-1 person, ideal admittance) with hidden mechanisms, as an "
+                   "ordinary log. What was hidden goes to stderr (not with -q) and to --key.",
+               "make_hidden_session"};
+  cli::Common c;
+  c.out = "hidden.lcm";
+  c.movements = 100;
+  std::string key, noise = "realistic";
   std::vector<std::string> hidden;
   std::uint64_t hidden_seed = 1;
-  int movements = 100, reps = 3;
-  bool force = false;
+  int reps = 3;
   bool no_truth = false;
-  app.add_option("-o,--out", out, "output LCM log (default hidden.lcm)");
+  cli::add_version(app, "make_hidden_session");
+  cli::add_quiet(app, c.quiet);
+  cli::add_out(app, c.out, "output LCM log (default hidden.lcm)");
+  cli::add_force(app, c.force)->description("replace existing output files (--out and --key)");
   app.add_option("--hidden", hidden,
                  "MECHANISM:MAGNITUDE, SI units, repeatable: delay:0.002 (s) | friction:1 (N) | handle:0.3 (kg) | "
                  "reflex:0.5 (x intrinsic K, D; 25-35 ms) | curl:40 (N/m). None: a clean session");
   app.add_option("--hidden-seed", hidden_seed, "draw of the session seed, impedance scale and reflex delay (default 1)");
-  app.add_option("--noise", noise, "none | quantisation | motor | variability | realistic (default)");
-  app.add_option("--movements", movements, "number of movements (default 100)")->check(CLI::Range(1, 100000));
+  app.add_option("--noise", noise, cli::join(kNoise) + " (default realistic)")->check(cli::one_of(kNoise));
+  cli::add_movements(app, c.movements, 1, 100000, "number of movements");
   app.add_option("--reps", reps, "perturbed repetitions per angle (default 3)")->check(CLI::Range(1, 1000));
-  app.add_option("--key", key, "also write what was hidden (text) to this file");
-  app.add_flag("--force", force, "replace existing output files");
+  app.add_option("--key", key,
+                 "also write what was hidden (text) to this file (an existing file is kept unless --force)");
   app.add_flag("--no-truth", no_truth,
                "leave the truth channels (unperturbed twins, intrinsic and apparent truth) out of the log; the apparent "
-               "truth is still printed on stderr and written to --key");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    const int rc = app.exit(e);
-    return rc == 0 ? exit_code::kOk : exit_code::kUsage;
-  }
+               "truth is still printed on stderr (not with -q) and written to --key");
+  cli::set_exit_codes(app, kExitCodes);
+  if (const auto rc = cli::parse(app, argc, argv)) return *rc;
   try {
     std::vector<HiddenEffect> effects;
     for (const auto& h : hidden) effects.push_back(parse_hidden_effect(h));
     SessionDesign base;
-    base.n_movements = movements;
+    base.n_movements = c.movements;
     base.reps_per_angle = reps;
     base.session.source = "manip_sim/linear";
     auto person = table1_person();
@@ -95,24 +105,30 @@ int main(int argc, char** argv) {
     what << "; hidden seed " << hidden_seed << ": session seed " << hs.draw.session_seed << ", impedance scale "
          << hs.draw.impedance_scale << ", reflex delay " << hs.draw.reflex_delay_s * 1000 << " ms, actuation delay "
          << hs.draw.actuation_delay_cycles << " cycles\n";
-    // The log: written next to the target and renamed when complete, so an
-    // existing file is never truncated (without --force it is refused first).
+    // The outputs: written next to their targets and renamed when complete,
+    // so an existing file is never truncated; without --force an existing
+    // --out or --key is refused here, before the session is simulated.
+    if (!key.empty() && std::filesystem::path(key).lexically_normal() == std::filesystem::path(c.out).lexically_normal())
+      throw manip::UsageError("--key: '" + key + "' is also the --out log");
     std::string apparent_text;
-    manip::AtomicOutput target(out, force);
+    manip::AtomicOutput target(c.out, c.force);
+    std::optional<manip::AtomicOutput> key_out;
+    if (!key.empty()) key_out.emplace(key, c.force);
     const std::string tmp = target.temp_path() + ".lcm";
     {
       manip::logging::LogWritingHandler w(tmp);
       NoTruth filtered(w);
       const auto sum = no_truth ? run_session(hs.design, *hs.person, filtered) : run_session(hs.design, *hs.person, w);
       w.close();
-      std::cerr << "make_hidden_session: " << sum.trials << " movements, " << sum.perturbed << " perturbed\n";
+      if (!c.quiet)
+        std::cerr << "make_hidden_session: " << sum.trials << " movements, " << sum.perturbed << " perturbed\n";
       if (sum.apparent) {  // the truth an estimator should land on (sim/truth.hpp): the hidden person-side effects are in it
         const auto& ap = *sum.apparent;
         std::ostringstream at;
         at << "apparent truth: D [" << ap.d_nspm(0, 0) << " " << ap.d_nspm(0, 1) << "; " << ap.d_nspm(1, 0) << " "
            << ap.d_nspm(1, 1) << "] N s/m, K [" << ap.k_npm(0, 0) << " " << ap.k_npm(0, 1) << "; " << ap.k_npm(1, 0)
            << " " << ap.k_npm(1, 1) << "] N/m\n";
-        std::cerr << "make_hidden_session: " << at.str();
+        if (!c.quiet) std::cerr << "make_hidden_session: " << at.str();
         apparent_text = at.str();
       }
     }
@@ -121,11 +137,15 @@ int main(int argc, char** argv) {
     std::filesystem::rename(tmp, target.temp_path(), ec);
     if (ec) {
       std::filesystem::remove(tmp, ec);
-      throw manip::OutputError(out + ": cannot be written (" + ec.message() + ")");
+      throw manip::OutputError(c.out + ": cannot be written (" + ec.message() + ")");
     }
     target.commit();
-    if (!key.empty()) manip::write_file_atomically(key, what.str() + apparent_text, force);
-    std::cerr << "make_hidden_session: wrote " << out << "; " << what.str();
+    if (key_out) {
+      const std::string text = what.str() + apparent_text;
+      if (std::fputs(text.c_str(), key_out->stream()) < 0) throw manip::OutputError(key + ": write failed");
+      key_out->commit();
+    }
+    if (!c.quiet) std::cerr << "make_hidden_session: wrote " << c.out << "; " << what.str();
   } catch (const manip::Error& e) {
     std::cerr << "make_hidden_session: " << e.what() << "\n";
     return e.exit_code();
