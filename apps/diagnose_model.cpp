@@ -1,29 +1,52 @@
 // diagnose_model: what a model gets wrong on measured data, the likely cause,
 // the extended model and its measured gain (docs/diagnosis.md).
 // Thin main: options, the single-joint front end, the engine, the reports.
+// Command line: common/cli.hpp (docs/cli.md): --version, -q, --force, the
+// exit-code table in --help.
 #include <chrono>
 #include <cstdio>
-#include <fstream>
 #include <iostream>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
+#include "manip/common/cli.hpp"
 #include "manip/common/errors.hpp"
 #include "manip/common/exit_codes.hpp"
+#include "manip/common/output_file.hpp"
 #include "manip/diagnosis/engine.hpp"
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/diagnosis/report.hpp"
 #include "manip/diagnosis/single_joint.hpp"
+#include "manip/version.hpp"
 
 namespace {
 
+namespace ec = manip::exit_code;
+const std::vector<int> kExitCodes = {ec::kOk, ec::kUsage, ec::kInput, ec::kOutput, ec::kInternal};
+const char* kExitNotes =
+    "What the codes mean for diagnose_model (several: the most severe wins, docs/exit-codes.md):\n"
+    "    0: diagnosis done, with or without a misfit found\n"
+    "    2: bad command line (also: no input, or logs and --single-joint together)\n"
+    "    4: an input is unusable: missing or unreadable, a malformed line (FILE:LINE: reason), too short for\n"
+    "       the cross-validation or too few perturbed trials, logs with different configurations\n"
+    "    6: the --json file exists (no --force; checked before any input is read) or cannot be written;\n"
+    "       nothing is left behind\n";
+
 int run(int argc, char** argv) {
   using namespace manip;
-  CLI::App app{"diagnose_model: show what the model gets wrong on measured data, name the cause, extend the model and measure the gain"};
+  namespace cli = manip::cli;
+  CLI::App app{"diagnose_model " + std::string(manip::kVersion) +
+                   ": show what the model gets wrong on measured data, name the cause, extend the model and measure "
+                   "the gain (docs/diagnosis.md)",
+               "diagnose_model"};
+  app.footer(kExitNotes);
   std::string single_joint, json_out;
   std::vector<std::string> logs;
-  bool quiet = false;
+  cli::Common c;
+  cli::add_version(app, "diagnose_model");
   diagnosis::SingleJointOptions sj;
   diagnosis::EngineOptions eo;
   std::string sign = "auto";
@@ -38,36 +61,36 @@ int run(int argc, char** argv) {
   double t_est = 0.15;
   app.add_flag("--no-default-method", no_pem, "manipulandum: do not fit the estimator's default method (pem) for comparison");
   app.add_option("--t-est", t_est, "manipulandum: estimation window after onset (s), as estimate_impedance")->check(CLI::Range(0.05, 1.0));
-  app.add_option("--json", json_out, "write the report as JSON to this file");
-  app.add_flag("-q,--quiet", quiet, "no progress on stderr");
+  app.add_option("--json", json_out, "write the report as JSON to this file (an existing file is kept unless --force)");
+  cli::add_force(app, c.force);
+  cli::add_quiet(app, c.quiet)->description("no progress on stderr (only warnings and errors)");
   app.add_option("--torque-sign", sign, "auto (K > 0 decides), +1 or -1")->check(CLI::IsMember({"auto", "+1", "-1", "1"}));
   app.add_option("--inertia", inertia, "fix the inertia to this value (kg m^2); enables the wrong-inertia mechanism")->check(CLI::NonNegativeNumber);
   app.add_option("--cutoff", sj.cutoff_hz, "Savitzky-Golay -3 dB cut-off (Hz)")->check(CLI::PositiveNumber);
   app.add_option("--folds", eo.folds, "cross-validation folds")->check(CLI::Range(3, 100));
   app.add_option("--bootstrap", eo.bootstrap, "block-bootstrap replicates")->check(CLI::Range(20, 100000));
   app.add_option("--alpha", eo.alpha, "family-wise significance level per greedy round")->check(CLI::Range(1e-6, 0.5));
-  app.footer(
-      "Exit codes: 0 diagnosis done; 2 bad command line; 4 input unusable (file:line: reason);\n"
-      "            6 output cannot be written; 70 internal error.");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    const int rc = app.exit(e);
-    return rc == 0 ? exit_code::kOk : exit_code::kUsage;
-  }
+  cli::set_exit_codes(app, kExitCodes);
+  if (const auto rc = cli::parse(app, argc, argv)) return *rc;
   if (single_joint.empty() && logs.empty()) {
     std::cerr << "diagnose_model: give LOG.lcm [LOG...] or --single-joint FILE.csv; see --help\n";
-    return exit_code::kUsage;
+    return ec::kUsage;
   }
   if (!logs.empty() && !single_joint.empty()) {
     std::cerr << "diagnose_model: give either session logs or --single-joint FILE.csv, not both\n";
-    return exit_code::kUsage;
+    return ec::kUsage;
   }
-  if (!quiet) eo.progress = [](const std::string& s) { std::cerr << "diagnose_model: " << s << "\n"; };
-  if (!json_out.empty()) {  // fail before the work if the output cannot be written
-    std::ofstream probe(json_out, std::ios::app);
-    if (!probe) throw OutputError(json_out + ": cannot be written");
-  }
+  if (!c.quiet) eo.progress = [](const std::string& s) { std::cerr << "diagnose_model: " << s << "\n"; };
+  // Refused before any input is read (exists without --force, directory not
+  // writable); written to a temporary beside it and renamed when complete, so
+  // a failed run leaves neither a truncated file nor a temporary.
+  std::optional<AtomicOutput> json_file;
+  if (!json_out.empty()) json_file.emplace(json_out, c.force);
+  const auto write_json = [&](const nlohmann::json& j) {
+    const std::string text = j.dump(2) + "\n";
+    if (std::fputs(text.c_str(), json_file->stream()) < 0) throw OutputError(json_out + ": write failed");
+    json_file->commit();
+  };
   if (!logs.empty()) {
     std::vector<diagnosis::CollectedSession> sessions;
     for (const auto& l : logs) {
@@ -104,14 +127,12 @@ int run(int argc, char** argv) {
     const auto pr = diagnosis::planar_report(prep, res, lib);
     ctx.extra_text = pr.text;
     std::cout << diagnosis::text_report(res, ctx);
-    if (!json_out.empty()) {
+    if (json_file) {
       auto j = diagnosis::json_report(res, ctx);
       j["manipulandum"] = pr.json;
-      std::ofstream out(json_out);
-      out << j.dump(2) << "\n";
-      if (!out) throw OutputError(json_out + ": write failed");
+      write_json(j);
     }
-    return exit_code::kOk;
+    return ec::kOk;
   }
   sj.torque_sign = sign == "auto" ? 0 : (sign == "-1" ? -1 : 1);
   if (inertia >= 0) {
@@ -131,12 +152,8 @@ int run(int argc, char** argv) {
                 prep.sign_flipped_automatically ? " (flipped: the record stores the reaction torque, baseline K was negative)" : "");
   ctx.preprocessing = buf;
   std::cout << diagnosis::text_report(res, ctx);
-  if (!json_out.empty()) {
-    std::ofstream out(json_out);
-    out << diagnosis::json_report(res, ctx).dump(2) << "\n";
-    if (!out) throw OutputError(json_out + ": write failed");
-  }
-  return exit_code::kOk;
+  if (json_file) write_json(diagnosis::json_report(res, ctx));
+  return ec::kOk;
 }
 
 }  // namespace
@@ -149,6 +166,6 @@ int main(int argc, char** argv) {
     return e.exit_code();
   } catch (const std::exception& e) {
     std::cerr << "diagnose_model: internal error: " << e.what() << "\n";
-    return manip::exit_code::kInternal;
+    return ec::kInternal;
   }
 }
