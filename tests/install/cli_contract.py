@@ -12,7 +12,7 @@
 * `--help-only` (apps not yet on common/cli.hpp): `--help` exits 0 and every
   "N  text" row it prints uses a code of the one table.
 * `--returns`: each documented code other than 70 (a bug) is produced by a
-  known bad (or good) invocation, so the table and the behaviour agree; a
+  known bad (or good) invocation (or several: ("ALL", case, ...)), so the table and the behaviour agree; a
   code that cannot be produced on this machine (9 on a PREEMPT_RT kernel) is
   named as skipped. A case may also require its stderr to match a pattern
   (manip_import: the mapping's file:line: key). The exit-0 case runs with -q and must print nothing on
@@ -21,6 +21,7 @@
 """
 import math
 import os
+import random
 import re
 import signal
 import subprocess
@@ -138,6 +139,41 @@ def import_cases(tmp, existing):
     }
 
 
+def single_joint_csv(path, seconds):
+    """diagnose_model: a single-joint record (docs/diagnosis.md: '# dt=' and
+    pos_rad, torque_nm), torque = I acc + B vel + K pos + c + noise from a sum
+    of sines; 12 s is enough for 3 folds."""
+    rnd = random.Random(7)
+    comps = [(rnd.uniform(0.5, 12.0), rnd.uniform(0.0, 6.3), rnd.uniform(0.005, 0.02)) for _ in range(12)]
+    rows = ["# dt=0.001"]
+    for i in range(int(seconds * 1000)):
+        t = i * 0.001
+        p = v = a = 0.0
+        for f, ph, amp in comps:
+            w = 2.0 * math.pi * f
+            p += amp * math.sin(w * t + ph)
+            v += amp * w * math.cos(w * t + ph)
+            a -= amp * w * w * math.sin(w * t + ph)
+        rows.append("%.9f,%.6f" % (p, 0.02 * a + 0.8 * v + 30.0 * p + 0.5 + rnd.gauss(0.0, 0.05)))
+    with open(path, "w") as f:
+        f.write("\n".join(rows) + "\n")
+
+
+def diagnose_cases(tmp, existing):
+    good, bad = os.path.join(tmp, "sj.csv"), os.path.join(tmp, "bad_sj.csv")
+    single_joint_csv(good, 12.0)
+    with open(bad, "w") as f:
+        f.write("# dt=0.001\n0.1,0.2\n0.1,abc\n")
+    fast = ["--folds", "3", "--bootstrap", "20"]
+    return {
+        0: ["--single-joint", good, "-q", "--json", os.path.join(tmp, "report.json")] + fast,
+        2: ["--single-joint", good, "--folds", "2"],
+        4: ("STDERR", re.escape(bad) + r":3: field 2 is not a finite number", ["--single-joint", bad] + fast),
+        # docs/cli.md: an existing output is kept; refused before the record is read.
+        6: ("STDERR", re.escape(existing) + r": exists", ["--single-joint", good, "--json", existing] + fast),
+    }
+
+
 def returns_cases(app, src, tmp, sim=None):
     """code -> argv producing it (run in tmp), or ("SIGINT", seconds, argv), or ("SKIP", reason).
     Only codes an app documents are used."""
@@ -177,6 +213,7 @@ def returns_cases(app, src, tmp, sim=None):
             6: [good, "--json", existing],
         }
     imp = import_cases(tmp, existing) if app == "manip_import" else {}
+    diag = diagnose_cases(tmp, existing) if app == "diagnose_model" else {}
     cases = {
         "manip_sim": {
             0: ["--out", os.path.join(tmp, "s.lcm"), "--movements", "10", "--reps", "1", "-q"],
@@ -212,6 +249,17 @@ def returns_cases(app, src, tmp, sim=None):
         },
         "estimate_impedance": est,
         "manip_import": imp,
+        "diagnose_model": diag,
+        "make_hidden_session": {
+            0: ["--movements", "8", "--reps", "1", "-q", "--out", os.path.join(tmp, "h.lcm"),
+                "--key", os.path.join(tmp, "h.key")],
+            2: ("STDERR", r"--hidden 'bogus:1': unknown mechanism", ["--hidden", "bogus:1", "--movements", "8",
+                                                                     "--reps", "1", "--out", os.path.join(tmp, "never.lcm")]),
+            # Both outputs: an existing --out or --key is kept and refused before the session runs.
+            6: ("ALL", ("STDERR", re.escape(existing) + r": exists", ["--movements", "8", "--reps", "1", "--out", existing]),
+                ("STDERR", re.escape(existing) + r": exists",
+                 ["--movements", "8", "--reps", "1", "--out", os.path.join(tmp, "never.lcm"), "--key", existing])),
+        },
         "manip_fake_drive": {
             2: ["--mass-kg", "inf"],
             # No such interface (on this kernel possibly no AF_CAN at all): the backend is unavailable.
@@ -266,9 +314,16 @@ def main():
             existing_path = os.path.join(tmp, "existing.out")   # written by returns_cases: "keep"
             if not cases:
                 failures.append("no return-code cases known for %s" % app)
+            # A code maps to one case, or to a list of cases ("ALL", case, case, ...).
+            flat = []
             for code, case in sorted(cases.items()):
                 if code not in rows:
                     failures.append("case for code %d, which --help does not document" % code)
+                if isinstance(case, tuple) and case[0] == "ALL":
+                    flat += [(code, c) for c in case[1:]]
+                else:
+                    flat.append((code, case))
+            for code, case in flat:
                 interrupt, want_err = None, None
                 if isinstance(case, tuple) and case[0] == "SKIP":
                     print("SKIP %s: code %d: %s" % (app, code, case[1]))
