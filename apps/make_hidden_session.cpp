@@ -50,8 +50,8 @@ int main(int argc, char** argv) {
   using namespace manip::sim;
   namespace cli = manip::cli;
   CLI::App app{"make_hidden_session " + std::string(manip::kVersion) +
-                   ": a simulated session (linear Table-1 person, ideal admittance) with hidden mechanisms, as an "
-                   "ordinary log. What was hidden goes to stderr (not with -q) and to --key.",
+                   ": a simulated session with hidden mechanisms, written as an ordinary log (linear Table-1 person, "
+                   "ideal admittance; docs/diagnosis.md). What was hidden goes to stderr (not with -q) and to --key.",
                "make_hidden_session"};
   cli::Common c;
   c.out = "hidden.lcm";
