@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <string>
 
+#include "fixtures.hpp"
 #include "manip/diagnosis/engine.hpp"
 #include "manip/diagnosis/single_joint.hpp"
 #include "manip/diagnosis/synthetic.hpp"
@@ -16,9 +17,8 @@
 namespace manip::diagnosis::test {
 
 inline std::string tmp_path(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / ("manip_diag_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  return (dir / name).string();
+  static const std::string dir = manip::testutil::temp_dir("diag");  // removed at exit
+  return dir + "/" + name;
 }
 
 struct Run {
