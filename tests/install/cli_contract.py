@@ -191,6 +191,16 @@ def returns_cases(app, src, tmp, sim=None):
     assert n == 1, "config/rt.yaml has no max_velocity_mps"
     with open(slow_yaml, "w") as f:
         f.write(rt_yaml)
+    # Paced and long (60 s) for the SIGINT case, with the overrun limits
+    # relaxed so a loaded machine cannot turn it into a fault: a fixed-time
+    # signal into an as-fast-as-possible session arrives after its end on a
+    # fast machine (CI finished a whole default session within 1.5 s).
+    paced_yaml = os.path.join(tmp, "paced_rt.yaml")
+    paced, n = re.subn(r"overrun_fault_(consecutive|per_second): *[0-9]+", r"overrun_fault_\1: 100000",
+                       open(os.path.join(src, "config", "rt.yaml")).read())
+    assert n == 2, "config/rt.yaml has no overrun_fault_* limits"
+    with open(paced_yaml, "w") as f:
+        f.write(paced)
     rt_log = lambda name: ["--out", os.path.join(tmp, name)]
     # estimate_impedance: logs written by manip_sim (--sim).
     est = {}
@@ -244,8 +254,8 @@ def returns_cases(app, src, tmp, sim=None):
             9: ("SKIP", "this kernel is PREEMPT_RT: --require-rt may succeed") if preempt_rt() else
                ["--realtime", "--require-rt", "--duration", "0.1", "--lcm-url", "none"] + rt_log("never.lcm"),
             10: ["--realtime", "--duration", "1", "--lcm-url", "nosuch://x"] + rt_log("bus.lcm"),
-            # As fast as possible (no overrun fault on a loaded machine); a whole session takes far longer than 1 s.
-            130: ("SIGINT", 1.0, ["--afap", "--lcm-url", "none", "--force"] + rt_log("int.lcm")),
+            130: ("SIGINT", 1.0, ["--config", paced_yaml, "--realtime", "--duration", "60", "--lcm-url", "none",
+                                  "--force"] + rt_log("int.lcm")),
         },
         "estimate_impedance": est,
         "manip_import": imp,
