@@ -158,14 +158,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const manip::Error& e) {
-    std::cerr << "diagnose_model: " << e.what() << "\n";
-    return e.exit_code();
-  } catch (const std::exception& e) {
-    std::cerr << "diagnose_model: internal error: " << e.what() << "\n";
-    return ec::kInternal;
-  }
-}
+int main(int argc, char** argv) { return manip::cli::run_main("diagnose_model", run, argc, argv); }

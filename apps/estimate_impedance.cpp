@@ -303,14 +303,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const manip::Error& e) {
-    std::cerr << "estimate_impedance: " << e.what() << "\n";
-    return e.exit_code();
-  } catch (const std::exception& e) {
-    std::cerr << "estimate_impedance: internal error: " << e.what() << "\n";
-    return ec::kInternal;
-  }
-}
+int main(int argc, char** argv) { return manip::cli::run_main("estimate_impedance", run, argc, argv); }

@@ -212,14 +212,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const Error& e) {
-    std::cerr << "impedance_study: " << e.what() << "\n";
-    return e.exit_code();
-  } catch (const std::exception& e) {
-    std::cerr << "impedance_study: internal error: " << e.what() << "\n";
-    return exit_code::kInternal;
-  }
-}
+int main(int argc, char** argv) { return manip::cli::run_main("impedance_study", run, argc, argv); }

@@ -46,7 +46,7 @@ const std::vector<int> kExitCodes = {exit_code::kOk, exit_code::kUsage, exit_cod
 const std::vector<std::string> kNoise = {"none", "quantisation", "motor", "variability", "realistic"};
 }  // namespace
 
-int main(int argc, char** argv) {
+static int run(int argc, char** argv) {
   using namespace manip::sim;
   namespace cli = manip::cli;
   CLI::App app{"make_hidden_session " + std::string(manip::kVersion) +
@@ -79,79 +79,73 @@ int main(int argc, char** argv) {
                "truth is still printed on stderr (not with -q) and written to --key");
   cli::set_exit_codes(app, kExitCodes);
   if (const auto rc = cli::parse(app, argc, argv)) return *rc;
+  std::vector<HiddenEffect> effects;
+  for (const auto& h : hidden) effects.push_back(parse_hidden_effect(h));
+  SessionDesign base;
+  base.n_movements = c.movements;
+  base.reps_per_angle = reps;
+  base.session.source = "manip_sim/linear";
+  auto person = table1_person();
   try {
-    std::vector<HiddenEffect> effects;
-    for (const auto& h : hidden) effects.push_back(parse_hidden_effect(h));
-    SessionDesign base;
-    base.n_movements = c.movements;
-    base.reps_per_angle = reps;
-    base.session.source = "manip_sim/linear";
-    auto person = table1_person();
-    try {
-      apply_noise(parse_noise_level(noise), base, person);
-    } catch (const std::invalid_argument& e) {
-      throw manip::UsageError(std::string("--noise: ") + e.what());
-    }
-    auto hs = make_hidden_session(base, person, effects, hidden_seed);
-    try {
-      (void)perturbation_schedule(hs.design);
-    } catch (const std::invalid_argument& e) {
-      throw manip::UsageError(std::string("--movements/--reps: ") + e.what());
-    }
-    std::ostringstream what;
-    what << "hidden:";
-    if (effects.empty()) what << " none";
-    for (const auto& e : effects) what << " " << to_string(e);
-    what << "; hidden seed " << hidden_seed << ": session seed " << hs.draw.session_seed << ", impedance scale "
-         << hs.draw.impedance_scale << ", reflex delay " << hs.draw.reflex_delay_s * 1000 << " ms, actuation delay "
-         << hs.draw.actuation_delay_cycles << " cycles\n";
-    // The outputs: written next to their targets and renamed when complete,
-    // so an existing file is never truncated; without --force an existing
-    // --out or --key is refused here, before the session is simulated.
-    if (!key.empty() && std::filesystem::path(key).lexically_normal() == std::filesystem::path(c.out).lexically_normal())
-      throw manip::UsageError("--key: '" + key + "' is also the --out log");
-    std::string apparent_text;
-    manip::AtomicOutput target(c.out, c.force);
-    std::optional<manip::AtomicOutput> key_out;
-    if (!key.empty()) key_out.emplace(key, c.force);
-    const std::string tmp = target.temp_path() + ".lcm";
-    {
-      manip::logging::LogWritingHandler w(tmp);
-      NoTruth filtered(w);
-      const auto sum = no_truth ? run_session(hs.design, *hs.person, filtered) : run_session(hs.design, *hs.person, w);
-      w.close();
-      if (!c.quiet)
-        std::cerr << "make_hidden_session: " << sum.trials << " movements, " << sum.perturbed << " perturbed\n";
-      if (sum.apparent) {  // the truth an estimator should land on (sim/truth.hpp): the hidden person-side effects are in it
-        const auto& ap = *sum.apparent;
-        std::ostringstream at;
-        at << "apparent truth: D [" << ap.d_nspm(0, 0) << " " << ap.d_nspm(0, 1) << "; " << ap.d_nspm(1, 0) << " "
-           << ap.d_nspm(1, 1) << "] N s/m, K [" << ap.k_npm(0, 0) << " " << ap.k_npm(0, 1) << "; " << ap.k_npm(1, 0)
-           << " " << ap.k_npm(1, 1) << "] N/m\n";
-        if (!c.quiet) std::cerr << "make_hidden_session: " << at.str();
-        apparent_text = at.str();
-      }
-    }
-    // Move the finished log over the temporary AtomicOutput holds, then commit.
-    std::error_code ec;
-    std::filesystem::rename(tmp, target.temp_path(), ec);
-    if (ec) {
-      std::filesystem::remove(tmp, ec);
-      throw manip::OutputError(c.out + ": cannot be written (" + ec.message() + ")");
-    }
-    target.commit();
-    if (key_out) {
-      const std::string text = what.str() + apparent_text;
-      if (std::fputs(text.c_str(), key_out->stream()) < 0) throw manip::OutputError(key + ": write failed");
-      key_out->commit();
-    }
-    if (!c.quiet) std::cerr << "make_hidden_session: wrote " << c.out << "; " << what.str();
-  } catch (const manip::Error& e) {
-    std::cerr << "make_hidden_session: " << e.what() << "\n";
-    return e.exit_code();
-  } catch (const std::exception& e) {
-    std::cerr << "make_hidden_session: internal error: " << e.what() << "\n";
-    return exit_code::kInternal;
+    apply_noise(parse_noise_level(noise), base, person);
+  } catch (const std::invalid_argument& e) {
+    throw manip::UsageError(std::string("--noise: ") + e.what());
   }
+  auto hs = make_hidden_session(base, person, effects, hidden_seed);
+  try {
+    (void)perturbation_schedule(hs.design);
+  } catch (const std::invalid_argument& e) {
+    throw manip::UsageError(std::string("--movements/--reps: ") + e.what());
+  }
+  std::ostringstream what;
+  what << "hidden:";
+  if (effects.empty()) what << " none";
+  for (const auto& e : effects) what << " " << to_string(e);
+  what << "; hidden seed " << hidden_seed << ": session seed " << hs.draw.session_seed << ", impedance scale "
+       << hs.draw.impedance_scale << ", reflex delay " << hs.draw.reflex_delay_s * 1000 << " ms, actuation delay "
+       << hs.draw.actuation_delay_cycles << " cycles\n";
+  // The outputs: written next to their targets and renamed when complete,
+  // so an existing file is never truncated; without --force an existing
+  // --out or --key is refused here, before the session is simulated.
+  if (!key.empty() && std::filesystem::path(key).lexically_normal() == std::filesystem::path(c.out).lexically_normal())
+    throw manip::UsageError("--key: '" + key + "' is also the --out log");
+  std::string apparent_text;
+  manip::AtomicOutput target(c.out, c.force);
+  std::optional<manip::AtomicOutput> key_out;
+  if (!key.empty()) key_out.emplace(key, c.force);
+  const std::string tmp = target.temp_path() + ".lcm";
+  {
+    manip::logging::LogWritingHandler w(tmp);
+    NoTruth filtered(w);
+    const auto sum = no_truth ? run_session(hs.design, *hs.person, filtered) : run_session(hs.design, *hs.person, w);
+    w.close();
+    if (!c.quiet)
+      std::cerr << "make_hidden_session: " << sum.trials << " movements, " << sum.perturbed << " perturbed\n";
+    if (sum.apparent) {  // the truth an estimator should land on (sim/truth.hpp): the hidden person-side effects are in it
+      const auto& ap = *sum.apparent;
+      std::ostringstream at;
+      at << "apparent truth: D [" << ap.d_nspm(0, 0) << " " << ap.d_nspm(0, 1) << "; " << ap.d_nspm(1, 0) << " "
+         << ap.d_nspm(1, 1) << "] N s/m, K [" << ap.k_npm(0, 0) << " " << ap.k_npm(0, 1) << "; " << ap.k_npm(1, 0)
+         << " " << ap.k_npm(1, 1) << "] N/m\n";
+      if (!c.quiet) std::cerr << "make_hidden_session: " << at.str();
+      apparent_text = at.str();
+    }
+  }
+  // Move the finished log over the temporary AtomicOutput holds, then commit.
+  std::error_code ec;
+  std::filesystem::rename(tmp, target.temp_path(), ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw manip::OutputError(c.out + ": cannot be written (" + ec.message() + ")");
+  }
+  target.commit();
+  if (key_out) {
+    const std::string text = what.str() + apparent_text;
+    if (std::fputs(text.c_str(), key_out->stream()) < 0) throw manip::OutputError(key + ": write failed");
+    key_out->commit();
+  }
+  if (!c.quiet) std::cerr << "make_hidden_session: wrote " << c.out << "; " << what.str();
   return exit_code::kOk;
 }
+
+int main(int argc, char** argv) { return manip::cli::run_main("make_hidden_session", run, argc, argv); }

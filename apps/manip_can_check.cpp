@@ -100,14 +100,4 @@ int run(int argc, char** argv) {
   return to_exit_code(r.exit_code);
 }
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const manip::Error& e) {
-    std::cerr << "manip_can_check: " << e.what() << "\n";
-    return e.exit_code();
-  } catch (const std::exception& e) {
-    std::cerr << "manip_can_check: internal error: " << e.what() << "\n";
-    return manip::exit_code::kInternal;
-  }
-}
+int main(int argc, char** argv) { return manip::cli::run_main("manip_can_check", run, argc, argv); }

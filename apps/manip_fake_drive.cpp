@@ -130,14 +130,4 @@ int run(int argc, char** argv) {
 }
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const manip::Error& e) {
-    std::cerr << "manip_fake_drive: " << e.what() << "\n";
-    return e.exit_code();
-  } catch (const std::exception& e) {
-    std::cerr << "manip_fake_drive: internal error: " << e.what() << "\n";
-    return manip::exit_code::kInternal;
-  }
-}
+int main(int argc, char** argv) { return manip::cli::run_main("manip_fake_drive", run, argc, argv); }

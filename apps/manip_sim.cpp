@@ -201,14 +201,4 @@ int run(int argc, char** argv) {
   return exit_code::kOk;
 }
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const manip::Error& e) {
-    std::cerr << "manip_sim: " << e.what() << "\n";
-    return e.exit_code();
-  } catch (const std::exception& e) {
-    std::cerr << "manip_sim: internal error: " << e.what() << "\n";
-    return manip::exit_code::kInternal;
-  }
-}
+int main(int argc, char** argv) { return manip::cli::run_main("manip_sim", run, argc, argv); }

@@ -16,6 +16,9 @@
 //   const auto cfg = manip::cli::find_config(c.config, "rt.yaml");  // ConfigError (3) if nowhere
 #include <CLI/CLI.hpp>
 
+#include "manip/common/errors.hpp"
+#include "manip/common/exit_codes.hpp"
+
 #include <filesystem>
 #include <initializer_list>
 #include <iostream>
@@ -104,5 +107,21 @@ std::vector<std::filesystem::path> config_search_path();
 // as is. Otherwise `given` is searched like a default name. Throws ConfigError
 // (exit 3) naming the file and every place searched when nothing is found.
 std::string find_config(const std::string& given, const std::string& default_name);
+
+// The one main() of every app: a typed set-up error (common/errors.hpp) is
+// one line "<program>: <reason>" with its documented exit code; any other
+// exception is a bug (exit 70, "internal error").
+template <class Run>
+int run_main(const char* program, Run&& run, int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const Error& e) {
+    std::cerr << program << ": " << e.what() << "\n";
+    return e.exit_code();
+  } catch (const std::exception& e) {
+    std::cerr << program << ": internal error: " << e.what() << "\n";
+    return exit_code::kInternal;
+  }
+}
 
 }  // namespace manip::cli
