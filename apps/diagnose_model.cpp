@@ -106,6 +106,7 @@ int run(int argc, char** argv) {
     const auto lib = diagnosis::planar_library(po.nuisance_order, time_varying);
     eo.require_plausible = true;
     eo.rank_by_t = true;
+    eo.prefer_simpler = true;
     const auto res = diagnosis::diagnose(prep.data, lib, eo);
     if (res.misfit_found() && po.pem_baseline) {
       if (eo.progress) eo.progress("refitting the default method with the extension");

@@ -411,6 +411,39 @@ std::vector<Block> make_blocks(const Dataset& d, const EngineOptions& opt, std::
   return blocks;
 }
 
+// Cluster-robust (sandwich) covariance of the least-squares parameters, with
+// the clusters given by the blocks' bootstrap units (Liang & Zeger 1986;
+// small-sample factor G/(G-1)): V = A^-1 (sum_g s_g s_g') A^-1, A = X'X,
+// s_g = X_g'(y_g - X_g theta) = h_g - G_g theta from the per-block statistics.
+// Within-trial (or within-block) correlation of the smoothed residual is
+// therefore allowed for; only the units are taken as independent.
+MatrixXd cluster_covariance(const std::vector<Stats>& bs, const std::vector<Block>& blocks, const VectorXd& th, int& clusters) {
+  const Eigen::Index p = th.size();
+  std::size_t nu = 0;
+  for (const auto& b : blocks) nu = std::max(nu, b.unit + 1);
+  std::vector<VectorXd> score(nu, VectorXd::Zero(p));
+  std::vector<bool> present(nu, false);
+  MatrixXd A = MatrixXd::Zero(p, p);
+  for (std::size_t b = 0; b < bs.size(); ++b) {
+    score[blocks[b].unit] += bs[b].h - bs[b].G * th;
+    present[blocks[b].unit] = true;
+    A += bs[b].G;
+  }
+  MatrixXd meat = MatrixXd::Zero(p, p);
+  clusters = 0;
+  for (std::size_t u = 0; u < nu; ++u)
+    if (present[u]) {
+      meat += score[u] * score[u].transpose();
+      ++clusters;
+    }
+  VectorXd s(p);
+  for (Eigen::Index i = 0; i < p; ++i) s(i) = A(i, i) > 0 ? 1.0 / std::sqrt(A(i, i)) : 1.0;
+  const MatrixXd Ainv = s.asDiagonal() * MatrixXd((s.asDiagonal() * A * s.asDiagonal()).completeOrthogonalDecomposition().pseudoInverse()) *
+                        s.asDiagonal();
+  const double g = static_cast<double>(clusters);
+  return (g > 1 ? g / (g - 1) : 1.0) * Ainv * meat * Ainv;
+}
+
 // Bootstrap weights per block: units (blocks, or trials for planar data) drawn
 // with replacement; a block's weight is the count of its unit.
 std::vector<std::vector<double>> multinomial_weights(const std::vector<Block>& blocks, int reps, PortableRng& rng) {
@@ -571,6 +604,17 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
         const double v = best_all_th(p + static_cast<Eigen::Index>(i));
         cs.params.push_back({gs[i].name, gs[i].unit, {v, v, v}, gs[i].plausible_lo, gs[i].plausible_hi, true});
       }
+      {
+        const auto cb = cand_stats(d, model, blocks, mech.columns(d, cs.setting));
+        std::vector<Stats> ab;
+        ab.reserve(bs.size());
+        for (std::size_t b = 0; b < bs.size(); ++b) ab.push_back(augment(bs[b], cb[b]));
+        const MatrixXd V = cluster_covariance(ab, blocks, best_all_th, cs.clusters);
+        for (std::size_t i = 0; i < gs.size(); ++i) {
+          const auto j = p + static_cast<Eigen::Index>(i);
+          cs.gain_se.push_back(std::sqrt(std::max(V(j, j), 0.0)));
+        }
+      }
       cand_lib.push_back(mi);
       cand_fold_sse.push_back(best_te_sse);
       rd.candidates.push_back(cs);
@@ -584,6 +628,15 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
         where.push_back(i);
       }
     const auto adj = stats::holm_adjust(pv);
+    {
+      // Power 90 % at the Bonferroni level of the round (Holm's first step).
+      const double z = stats::norm_isf(opt.alpha / static_cast<double>(std::max<std::size_t>(where.size(), 1))) + stats::norm_isf(0.10);
+      for (const auto w : where) {
+        auto& c = rd.candidates[w];
+        c.gain_mde.clear();
+        for (const double se : c.gain_se) c.gain_mde.push_back(z * se);
+      }
+    }
     int winner = -1;
     double best_gain = 0;
     std::size_t winner_c = 0;
@@ -600,6 +653,24 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
         best_gain = score;
         winner_c = j;
       }
+    }
+    if (opt.prefer_simpler && winner >= 0) {
+      const auto& best = rd.candidates[static_cast<std::size_t>(winner)];
+      auto n_free = [&](std::size_t j) { return lib[cand_lib[j]]->shape_params().size() + lib[cand_lib[j]]->gains().size(); };
+      std::size_t pick = winner_c;
+      for (std::size_t j = 0; j < where.size(); ++j) {
+        const auto& c = rd.candidates[where[j]];
+        if (j == winner_c || !c.significant || c.implausible) continue;
+        std::vector<double> diff;
+        for (std::size_t k = 0; k < c.fold_gain.size(); ++k) diff.push_back(best.fold_gain[k] - c.fold_gain[k]);
+        const auto t = stats::one_sided_t(diff);
+        const bool equivalent = t.mean <= t.se;
+        const bool simpler = n_free(j) < n_free(pick) ||
+                             (n_free(j) == n_free(pick) && (opt.rank_by_t ? c.test.t : c.test.mean) > (opt.rank_by_t ? rd.candidates[where[pick]].test.t : rd.candidates[where[pick]].test.mean));
+        if (equivalent && simpler) pick = j;
+      }
+      winner_c = pick;
+      winner = static_cast<int>(where[pick]);
     }
     rd.accepted = winner;
     if (winner < 0) {

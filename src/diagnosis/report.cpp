@@ -93,6 +93,20 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
       o << ")\n";
     }
   }
+  if (!d.rounds.empty()) {
+    o << "\nDetection limits of this session (round 1, against the baseline): per gain, its estimate +- cluster-robust SE and\n"
+         "the smallest |gain| detected with 90 % power at the round's level (in-sample Wald; the cross-validated search needs more):\n";
+    for (const auto& c : d.rounds.front().candidates) {
+      if (!c.not_applicable.empty() || c.gain_mde.empty()) continue;
+      o << "   " << c.id << std::string(c.id.size() < 22 ? 22 - c.id.size() : 1, ' ');
+      const std::size_t ns = c.params.size() - c.gain_se.size();
+      for (std::size_t k = 0; k < c.gain_se.size(); ++k) {
+        const auto& pp = c.params[ns + k];
+        o << (k ? "; " : "") << pp.name << " " << g4(pp.est.value) << " +- " << g4(c.gain_se[k]) << ", limit " << g4(c.gain_mde[k]) << " " << pp.unit;
+      }
+      o << "  (" << c.clusters << " units)\n";
+    }
+  }
   o << "\n";
   if (!d.misfit_found()) {
     o << "Result: no significant misfit: no mechanism of the library improves the held-out prediction significantly.\n";
@@ -166,6 +180,11 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
         jc["significant"] = c.significant;
         jc["implausible"] = c.implausible;
         for (const auto& p : c.params) jc["params"][p.name] = p.est.value;
+        const std::size_t ns = c.params.size() - c.gain_se.size();
+        for (std::size_t k = 0; k < c.gain_se.size(); ++k) {
+          jc["detection"][c.params[ns + k].name] = {{"se", c.gain_se[k]}, {"limit_90", k < c.gain_mde.size() ? c.gain_mde[k] : 0.0}};
+        }
+        jc["detection_units"] = c.clusters;
       }
       jr["candidates"].push_back(jc);
     }

@@ -36,6 +36,15 @@ struct EngineOptions {
   // of the largest mean gain: a mechanism with many free gains can reach a
   // mean gain similar to the true one's by fitting a few trials well.
   bool rank_by_t = false;
+  // Parsimony among the significant candidates (the "one-standard-error
+  // rule" of cross-validated model choice, Breiman et al. 1984, Hastie,
+  // Tibshirani & Friedman 2009 §7.10): the candidate with the fewest free
+  // parameters (shape + gains) whose fold gains are within one standard error
+  // of the best candidate's (paired over folds) is accepted. A flexible
+  // mechanism (the 7-gain reflex) otherwise wins by fitting a one-gain
+  // mechanism's signature nearly as well (Δx(t − τ) and Δẋ(t − τ) span
+  // Δẍ-like shapes), and names the wrong cause.
+  bool prefer_simpler = false;
 };
 
 struct Interval {
@@ -67,6 +76,16 @@ struct CandidateScore {
   bool implausible = false;  // significant or not: a parameter outside its plausible range (require_plausible)
   std::vector<ParamEstimate> params;  // fitted on all data (no interval)
   std::vector<double> setting;        // chosen shape parameters on all data
+  // Detection limit of this session for this mechanism (docs/diagnosis.md,
+  // "Detection limits"), one entry per gain at the chosen shape: the
+  // cluster-robust standard error of the gain (clusters = the bootstrap
+  // units: trials, or blocks of a record) and the smallest |gain| a one-sided
+  // test at alpha/m (m applicable candidates of the round) detects with 90 %
+  // power, (z_{1-alpha/m} + z_0.9) SE. It is the limit of an in-sample Wald
+  // test; the cross-validated decision is more conservative (the study in
+  // docs/diagnosis.md measures by how much). SE scales as 1/sqrt(units).
+  std::vector<double> gain_se, gain_mde;
+  int clusters = 0;
 };
 
 struct Round {
