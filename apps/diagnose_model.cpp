@@ -17,6 +17,7 @@
 #include "manip/common/exit_codes.hpp"
 #include "manip/common/output_file.hpp"
 #include "manip/diagnosis/engine.hpp"
+#include "manip/diagnosis/likelihood_stage.hpp"
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/diagnosis/report.hpp"
 #include "manip/diagnosis/single_joint.hpp"
@@ -125,12 +126,18 @@ int run(int argc, char** argv) {
     ctx.baseline_equation = "Δu_ext - M_BSP Δẍ = D Δẋ + K Δx (eq. 14 with eq. 21's Δu_ext; D full, K symmetric, M_BSP eq. 16 fixed)";
     ctx.cv_units = "trials (both axes of a trial in the same fold; bootstrap resamples trials)";
     ctx.target_word = "target";
+    diagnosis::LikelihoodStage lk;
+    if (po.pem_baseline) lk = diagnosis::likelihood_stage(prep, res, lib, eo.alpha, eo.folds, eo.progress);
+    else lk.error = "--no-default-method";
+    const auto concl = diagnosis::conclude(res, lk, prep);
     const auto pr = diagnosis::planar_report(prep, res, lib);
-    ctx.extra_text = pr.text;
+    ctx.extra_text = pr.text + diagnosis::likelihood_text(lk) + diagnosis::conclusion_text(concl, res);
     std::cout << diagnosis::text_report(res, ctx);
     if (json_file) {
       auto j = diagnosis::json_report(res, ctx);
       j["manipulandum"] = pr.json;
+      j["likelihood"] = diagnosis::likelihood_json(lk);
+      j["conclusion"] = diagnosis::conclusion_json(concl);
       write_json(j);
     }
     return ec::kOk;

@@ -307,7 +307,28 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
   return out;
 }
 
-PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std::vector<Vector2d>>* correction) {
+namespace {
+void apply_correction(std::vector<estimation::OeWindow>& ws, const std::vector<std::vector<Vector2d>>* correction) {
+  if (!correction) return;
+  for (std::size_t i = 0; i < ws.size() && i < correction->size(); ++i) {
+    auto& w = ws[i];
+    const auto& c = (*correction)[i];
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      const auto j = static_cast<std::size_t>(w.onset_offset) + k;
+      if (j < w.u_n.size()) w.u_n[j] -= c[k];
+    }
+  }
+}
+}  // namespace
+
+std::vector<estimation::OeWindow> corrected_pem_windows(const PlanarPrepared& prep, const std::vector<std::vector<Vector2d>>* correction) {
+  auto pw = prep.pw;
+  apply_correction(pw, correction);
+  return pw;
+}
+
+PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std::vector<Vector2d>>* correction,
+                               const std::vector<std::size_t>* trials) {
   PemBaseline r;
   r.method = prep.settings.methods.empty() ? estimation::default_method() : prep.settings.methods[0];
   const estimation::Method* m = estimation::find_method(r.method);
@@ -317,20 +338,8 @@ PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std
   }
   auto oe = prep.oe;
   auto pw = prep.pw;
-  if (correction) {
-    auto apply = [&](std::vector<estimation::OeWindow>& ws) {
-      for (std::size_t i = 0; i < ws.size() && i < correction->size(); ++i) {
-        auto& w = ws[i];
-        const auto& c = (*correction)[i];
-        for (std::size_t k = 0; k < c.size(); ++k) {
-          const auto j = static_cast<std::size_t>(w.onset_offset) + k;
-          if (j < w.u_n.size()) w.u_n[j] -= c[k];
-        }
-      }
-    };
-    apply(oe);
-    apply(pw);
-  }
+  apply_correction(oe, correction);
+  apply_correction(pw, correction);
   estimation::SessionWindows sw;
   sw.info = &prep.info;
   sw.settings = &prep.settings;
@@ -340,6 +349,7 @@ PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std
   sw.prediction_error = pw;
   std::vector<std::size_t> idx(prep.vw.size());
   for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
+  if (trials) idx = *trials;
   try {
     const auto e = m->fit(sw, {idx, nullptr});
     r.available = true;
@@ -352,6 +362,7 @@ PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std
     if (e.disturbance) {
       r.has_likelihood = true;
       r.neg_log_likelihood = e.disturbance->neg_log_likelihood;
+      r.noise = *e.disturbance;
     }
   } catch (const std::exception& ex) {
     r.error = ex.what();

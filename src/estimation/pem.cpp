@@ -521,4 +521,31 @@ ImpedanceEstimate fit_prediction_error(std::span<const OeWindow> windows, const 
   return e;
 }
 
+std::vector<double> window_neg_log_likelihood(std::span<const OeWindow> windows, const PemSettings& s, const Mat2& d_nspm,
+                                              const Mat2& k_npm, const DisturbanceModel& noise) {
+  if (windows.empty()) return {};
+  const Layout lay{s.structure == PemStructure::box_jenkins};
+  if (noise.box_jenkins != lay.bj)
+    throw std::invalid_argument("prediction-error likelihood: the noise model's structure does not match the settings");
+  Problem pr(windows, lay);
+  const int L = lay.log0();
+  Eigen::VectorXd p(lay.size());
+  p.head(7) << d_nspm(0, 0), d_nspm(0, 1), d_nspm(1, 0), d_nspm(1, 1), k_npm(0, 0), k_npm(0, 1), k_npm(1, 1);
+  if (lay.bj) p.segment(7, 7) << noise.d_nspm(0, 0), noise.d_nspm(0, 1), noise.d_nspm(1, 0), noise.d_nspm(1, 1), noise.k_npm(0, 0),
+      noise.k_npm(0, 1), noise.k_npm(1, 1);
+  p.segment(L, 4) << std::log(noise.drive_psd), std::log(noise.motor_noise_n), std::log(noise.motor_tau_s),
+      std::log(noise.meas_std_m * noise.meas_std_m * 1e12);
+  const auto md = model_at(pr, p);
+  std::vector<double> out;
+  std::vector<Vec2> e, resp;
+  for (std::size_t wi = 0; wi < windows.size(); ++wi) {
+    if (lay.bj) resp = pr.response(p, wi);
+    pr.innovations(md.m, md.g, wi, &resp, true, e);
+    double v = 0.0;
+    for (std::size_t k = 0; k < pr.n; ++k) v += (md.g.l_inv[k] * e[k]).squaredNorm() + md.g.log_det[k];
+    out.push_back(0.5 * v);
+  }
+  return out;
+}
+
 }  // namespace manip::estimation

@@ -86,6 +86,7 @@ struct PemBaseline {
   Eigen::Matrix2d k_lo = Eigen::Matrix2d::Zero(), k_hi = Eigen::Matrix2d::Zero();
   double neg_log_likelihood = 0.0;  // pem only (0 otherwise)
   bool has_likelihood = false;
+  estimation::DisturbanceModel noise{};  // pem: the fitted model of the person's own motion and noise (when has_likelihood)
 };
 
 // The extension's amplitude refined by the default method's likelihood: the
@@ -129,8 +130,13 @@ struct PlanarPrepared {
 // u_pert − correction: an extension that is linear in the variational signals
 // (delayed u_pert, friction force, curl, handle mass, reflex) moved to the
 // input side with the gains of the equation-error fit.
+// `trials` (indices into the used trials): fit on these only (cross-validation), default all.
 [[nodiscard]] PemBaseline fit_default_method(const PlanarPrepared& prep,
-                                             const std::vector<std::vector<Eigen::Vector2d>>* correction = nullptr);
+                                             const std::vector<std::vector<Eigen::Vector2d>>* correction = nullptr,
+                                             const std::vector<std::size_t>* trials = nullptr);
+// The default method's windows with `correction` applied (as fit_default_method gives them to the method).
+[[nodiscard]] std::vector<estimation::OeWindow> corrected_pem_windows(const PlanarPrepared& prep,
+                                                                     const std::vector<std::vector<Eigen::Vector2d>>* correction);
 
 // The extended model's correction of u_pert per used trial: Σ gain × column
 // over the accepted mechanisms, gains from the full-data equation-error fit.

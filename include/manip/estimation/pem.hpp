@@ -21,6 +21,7 @@
 // the window (causal: nothing after the window leaks in); it is maximised over
 // D (full), K (symmetric), D_v, K_v and (q_s, σ_n, τ, r) by Fisher scoring.
 #include <span>
+#include <vector>
 
 #include "manip/estimation/impedance.hpp"
 
@@ -62,5 +63,13 @@ OeWindow make_pem_window(const SessionInfo& info, const TrialData& trial, const 
 
 // The noise model at the optimum is returned in ImpedanceEstimate::disturbance.
 ImpedanceEstimate fit_prediction_error(std::span<const OeWindow> windows, const PemSettings& s);
+
+// Negative log-likelihood of each window at given D, K and noise model (the
+// fit's own likelihood, ½ Σ_k (log det S_k + e_kᵀ S_k⁻¹ e_k), not refitted):
+// held-out scoring of a fit on other trials (docs/diagnosis.md, "Likelihood
+// check"). The sum over the windows of a fit, at its own optimum, is its
+// DisturbanceModel::neg_log_likelihood.
+std::vector<double> window_neg_log_likelihood(std::span<const OeWindow> windows, const PemSettings& s, const Mat2& d_nspm,
+                                              const Mat2& k_npm, const DisturbanceModel& noise);
 
 }  // namespace manip::estimation

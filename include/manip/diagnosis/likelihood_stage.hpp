@@ -1,0 +1,104 @@
+#pragma once
+// The likelihood check of the manipulandum diagnosis (docs/diagnosis.md,
+// "Likelihood check"): every candidate of the mechanism library scored by the
+// estimator's default method (`pem`: the exact Gaussian likelihood of the raw
+// positions with its model of the person's own motion and motor noise).
+//
+// Why a second stage: the equation-error search (engine.hpp) works on the
+// isolated, differentiated signals, whose noise is large and coloured; a
+// mechanism that the constant D, K absorbs to first order (curl stiffness
+// against the antisymmetric part of D, a delayed reflex) leaves too small an
+// equation-error residual to be found in 24 trials. The likelihood of the raw
+// positions uses the same data far more efficiently: on one hidden-curl
+// session (seed 3) the equation-error detection limit for c is 59 N/m while
+// the likelihood ratio for the hidden 40 N/m is 8.2 (p = 0.004).
+//
+// Each candidate m is a one-parameter family of corrections of the
+// perturbation force, u_pert − C_acc − α C_m, where C_m is the mechanism's
+// correction with its equation-error gains and shape (extension_correction)
+// and C_acc the already accepted ones at their fitted amplitudes; D, K and
+// the noise model are re-fitted at every α (profile likelihood). The
+// likelihood ratio LR = 2 (NLL(0) − min_α NLL(α)) is referred to χ² with as
+// many degrees of freedom as the candidate's equation-error parameters
+// (shape + gains: the direction C_m was itself fitted to these data), so a
+// flexible mechanism pays for its flexibility; Holm over the round's
+// candidates at level alpha; the accepted mechanism must keep plausible
+// parameters (α × gains inside their bounds, shapes not on the edge of their
+// grid). Greedy rounds until no candidate is significant.
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "manip/diagnosis/engine.hpp"
+#include "manip/diagnosis/manipulandum.hpp"
+#include "manip/diagnosis/stats.hpp"
+
+namespace manip::diagnosis {
+
+struct LikelihoodCandidate {
+  std::string id;
+  std::vector<double> setting;  // shape, from the equation-error search
+  int df = 1;                   // shape + gains of the mechanism
+  double alpha = 0.0;           // amplitude at the likelihood optimum (1 = equation-error gains)
+  double nll0 = 0.0, nll = 0.0, lr = 0.0, p = 1.0, p_holm = 1.0;
+  bool significant = false, plausible = true;
+  std::string implausible_reason;
+  std::vector<ParamEstimate> params;  // shape params, then α × gains
+  PemBaseline fit;                    // default method at the optimum (accepted ones included)
+  // Accepted candidates only: cross-validation over trials (folds of
+  // neighbouring trials, as the equation-error search): per fold, both models
+  // fitted on the other trials (the amplitude profiled there), the held-out
+  // trials' negative log-likelihood at those fits (pem.hpp,
+  // window_neg_log_likelihood); gain = NLL_without − NLL_with per held-out
+  // trial [nats], one-sided t over folds.
+  std::vector<double> fold_gain_nats;
+  stats::OneSidedT heldout;
+  bool heldout_done = false;
+};
+
+struct LikelihoodRound {
+  std::vector<LikelihoodCandidate> candidates;
+  int accepted = -1;
+};
+
+struct LikelihoodStage {
+  bool available = false;
+  std::string error;  // why not (no likelihood from the default method, …)
+  double alpha_level = 0.05;
+  std::vector<LikelihoodRound> rounds;
+  std::vector<std::string> accepted;   // in the order added
+  std::vector<LikelihoodCandidate> accepted_fits;
+  double nll_baseline = 0.0, nll_final = 0.0;
+  PemBaseline fit;  // the default method with every accepted correction (the corrected estimate)
+  int evaluations = 0;
+  [[nodiscard]] bool misfit_found() const { return !accepted.empty(); }
+  // D, K of the corrected estimate, curl included in K when accepted.
+  [[nodiscard]] PlanarImpedance impedance() const;
+};
+
+// folds: of the held-out check of each accepted candidate (0: none).
+[[nodiscard]] LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg,
+                                               const std::vector<std::unique_ptr<Mechanism>>& lib, double alpha = 0.05,
+                                               int folds = 10, const std::function<void(const std::string&)>& progress = {});
+
+[[nodiscard]] std::string likelihood_text(const LikelihoodStage& s);
+[[nodiscard]] nlohmann::json likelihood_json(const LikelihoodStage& s);
+
+// The diagnosis' answer: the causes named by the likelihood check when the
+// default method has a likelihood (it uses the data more efficiently and
+// decides), else by the equation-error search; with the corrected D, K and,
+// when nothing was named, the session's detection limits.
+struct Conclusion {
+  std::string decided_by;  // "likelihood" or "equation_error"
+  std::vector<std::string> named;
+  bool has_corrected = false;
+  PlanarImpedance corrected;
+};
+[[nodiscard]] Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarPrepared& prep);
+[[nodiscard]] std::string conclusion_text(const Conclusion& c, const Diagnosis& dg);
+[[nodiscard]] nlohmann::json conclusion_json(const Conclusion& c);
+
+}  // namespace manip::diagnosis

@@ -1,0 +1,403 @@
+#include "manip/diagnosis/likelihood_stage.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <sstream>
+
+#include "manip/diagnosis/stats.hpp"
+#include "manip/estimation/pem.hpp"
+
+namespace manip::diagnosis {
+namespace {
+
+using Correction = std::vector<std::vector<Eigen::Vector2d>>;
+
+double nll_of(const PemBaseline& p) {
+  return p.available && p.has_likelihood ? p.neg_log_likelihood : std::numeric_limits<double>::infinity();
+}
+
+Correction add(const Correction& a, const Correction& b) {
+  if (a.empty()) return b;
+  Correction c = a;
+  for (std::size_t i = 0; i < c.size() && i < b.size(); ++i)
+    for (std::size_t k = 0; k < c[i].size() && k < b[i].size(); ++k) c[i][k] += b[i][k];
+  return c;
+}
+
+// Profile of the negative log-likelihood in the amplitude α (D, K and the
+// noise model re-fitted at every α). The correction enters the model's input
+// linearly, so NLL(α) is close to a parabola: α = 0 (given), 1, then 2 or −1
+// towards the descent, then two steps of successive parabolic interpolation
+// through the three best points, α clamped to [−2, 3].
+struct Profile {
+  double alpha = 0.0;
+  PemBaseline fit;
+  int evaluations = 0;
+};
+Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaseline& fit0) {
+  Profile out;
+  std::vector<std::pair<double, PemBaseline>> pts = {{0.0, fit0}};
+  auto at = [&](double a) {
+    ++out.evaluations;
+    pts.emplace_back(a, eval(a));
+  };
+  at(1.0);
+  at(nll_of(pts[1].second) < nll_of(fit0) ? 2.0 : -1.0);
+  auto by_nll = [](const auto& x, const auto& y) { return nll_of(x.second) < nll_of(y.second); };
+  for (int step = 0; step < 2; ++step) {
+    std::sort(pts.begin(), pts.end(), by_nll);
+    const double xa = pts[0].first, xb = pts[1].first, xc = pts[2].first;
+    const double fa = nll_of(pts[0].second), fb = nll_of(pts[1].second), fc = nll_of(pts[2].second);
+    if (!std::isfinite(fa) || !std::isfinite(fb) || !std::isfinite(fc)) break;
+    const double num = (xb - xa) * (xb - xa) * (fb - fc) - (xb - xc) * (xb - xc) * (fb - fa);
+    const double den = (xb - xa) * (fb - fc) - (xb - xc) * (fb - fa);
+    double xn = std::fabs(den) > 0 ? xb - 0.5 * num / den : xa;
+    if (!std::isfinite(xn)) xn = xa;
+    xn = std::clamp(xn, -2.0, 3.0);
+    bool seen = false;
+    for (const auto& p : pts) seen = seen || std::fabs(p.first - xn) < 1e-3;
+    if (seen) break;
+    at(xn);
+  }
+  std::sort(pts.begin(), pts.end(), by_nll);
+  out.alpha = pts[0].first;
+  out.fit = pts[0].second;
+  return out;
+}
+
+// Held-out check of one accepted candidate: folds of neighbouring trials;
+// per fold both models are fitted on the other trials (the candidate's
+// amplitude profiled there) and scored by the likelihood of the held-out
+// trials at those fits.
+void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
+                   const std::function<Correction(double)>& corr_m, LikelihoodCandidate& lc, int& evaluations) {
+  const std::size_t n = prep.pw.size();
+  if (folds < 3 || n < static_cast<std::size_t>(folds)) return;
+  for (int k = 0; k < folds; ++k) {
+    std::vector<std::size_t> train, test;
+    for (std::size_t i = 0; i < n; ++i) (static_cast<int>(i * static_cast<std::size_t>(folds) / n) == k ? test : train).push_back(i);
+    const PemBaseline base = fit_default_method(prep, acc.empty() ? nullptr : &acc, &train);
+    ++evaluations;
+    const auto pr = profile(
+        [&](double a) {
+          const auto c = add(acc, corr_m(a));
+          return fit_default_method(prep, &c, &train);
+        },
+        base);
+    evaluations += pr.evaluations;
+    if (!base.has_likelihood || !pr.fit.has_likelihood) return;
+    auto test_nll = [&](const Correction* c, const PemBaseline& f) {
+      const auto all = corrected_pem_windows(prep, c);
+      std::vector<estimation::OeWindow> ws;
+      for (const auto i : test) ws.push_back(all[i]);
+      const auto v = estimation::window_neg_log_likelihood(ws, prep.settings.pem, f.d, f.k, f.noise);
+      double t = 0;
+      for (const double x : v) t += x;
+      return t;
+    };
+    const auto c_ext = add(acc, corr_m(pr.alpha));
+    const double before = test_nll(acc.empty() ? nullptr : &acc, base);
+    const double after = test_nll(&c_ext, pr.fit);
+    lc.fold_gain_nats.push_back((before - after) / static_cast<double>(test.size()));
+  }
+  lc.heldout = stats::one_sided_t(lc.fold_gain_nats);
+  lc.heldout_done = true;
+}
+
+std::string g4(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4g", v);
+  return b;
+}
+
+}  // namespace
+
+PlanarImpedance LikelihoodStage::impedance() const {
+  PlanarImpedance z;
+  z.d = fit.d;
+  z.k = fit.k;
+  for (const auto& c : accepted_fits)
+    if (c.id == "curl_stiffness")
+      for (const auto& p : c.params)
+        if (p.name == "curl_c") {
+          z.k(0, 1) += p.est.value;
+          z.k(1, 0) -= p.est.value;
+        }
+  return z;
+}
+
+LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg, const std::vector<std::unique_ptr<Mechanism>>& lib,
+                                 double alpha, int folds, const std::function<void(const std::string&)>& progress) {
+  LikelihoodStage st;
+  st.alpha_level = alpha;
+  if (!prep.pem.available || !prep.pem.has_likelihood) {
+    st.error = prep.pem.available ? "the default method (" + prep.pem.method + ") gives no likelihood"
+                                  : "the default method was not fitted" + (prep.pem.error.empty() ? std::string() : ": " + prep.pem.error);
+    return st;
+  }
+  if (dg.rounds.empty()) {
+    st.error = "no equation-error search to take the candidates from";
+    return st;
+  }
+  const auto& d = prep.data;
+  // Each applicable candidate with its equation-error shape; its correction at
+  // amplitude α and its equation-error gains (the direction).
+  struct Cand {
+    const Mechanism* mech;
+    std::vector<double> setting;
+    std::vector<double> gains_ee;
+  };
+  std::vector<Cand> cands;
+  for (const auto& c : dg.rounds.front().candidates) {
+    if (!c.not_applicable.empty()) continue;
+    const Mechanism* m = nullptr;
+    for (const auto& l : lib)
+      if (l->id() == c.id) m = l.get();
+    if (!m) continue;
+    Cand k{m, c.setting, {}};
+    const auto cols = m->columns(d, c.setting);
+    const auto f = fit_full(d, {&cols});
+    for (std::size_t g = 0; g < m->gains().size(); ++g) k.gains_ee.push_back(f.theta(static_cast<Eigen::Index>(d.n_base() + g)));
+    cands.push_back(std::move(k));
+  }
+  auto correction_of = [&](const Cand& c, double a) {
+    Diagnosis one;
+    one.accepted = {c.mech->id()};
+    one.accepted_settings = {c.setting};
+    return extension_correction(d, one, lib, a);
+  };
+
+  st.available = true;
+  st.nll_baseline = nll_of(prep.pem);
+  PemBaseline cur = prep.pem;
+  Correction acc;
+  std::vector<bool> used(cands.size(), false);
+  for (std::size_t round = 0; round < cands.size(); ++round) {
+    LikelihoodRound rd;
+    std::vector<std::size_t> idx;
+    for (std::size_t i = 0; i < cands.size(); ++i) {
+      if (used[i]) continue;
+      const auto& c = cands[i];
+      if (progress) progress("likelihood check, round " + std::to_string(round + 1) + ": " + c.mech->id());
+      const auto pr = profile(
+          [&](double a) {
+            const auto corr = add(acc, correction_of(c, a));
+            return fit_default_method(prep, &corr);
+          },
+          cur);
+      st.evaluations += pr.evaluations;
+      LikelihoodCandidate lc;
+      lc.id = c.mech->id();
+      lc.setting = c.setting;
+      const auto sp = c.mech->shape_params();
+      const auto gs = c.mech->gains();
+      lc.df = static_cast<int>(sp.size() + gs.size());
+      lc.alpha = pr.alpha;
+      lc.nll0 = nll_of(cur);
+      lc.nll = nll_of(pr.fit);
+      lc.lr = std::isfinite(lc.nll) ? std::max(0.0, 2.0 * (lc.nll0 - lc.nll)) : 0.0;
+      lc.p = stats::chi2_sf(lc.lr, static_cast<double>(lc.df));
+      lc.fit = pr.fit;
+      for (std::size_t s = 0; s < sp.size(); ++s) {
+        const double v = c.setting[s];
+        lc.params.push_back({sp[s].name, sp[s].unit, {v, v, v}, sp[s].plausible_lo, sp[s].plausible_hi, true, true});
+        if (lc.params.back().at_edge()) {
+          lc.plausible = false;
+          lc.implausible_reason = sp[s].name + " on the edge of its search range";
+        }
+      }
+      for (std::size_t g = 0; g < gs.size(); ++g) {
+        const double v = lc.alpha * c.gains_ee[g];
+        lc.params.push_back({gs[g].name, gs[g].unit, {v, v, v}, gs[g].plausible_lo, gs[g].plausible_hi, true});
+        if (!lc.params.back().plausible() && lc.plausible) {
+          lc.plausible = false;
+          lc.implausible_reason = gs[g].name + " " + g4(v) + " " + gs[g].unit + " outside " + g4(gs[g].plausible_lo) + " … " + g4(gs[g].plausible_hi);
+        }
+      }
+      rd.candidates.push_back(std::move(lc));
+      idx.push_back(i);
+    }
+    if (rd.candidates.empty()) break;
+    std::vector<double> pv;
+    for (const auto& c : rd.candidates) pv.push_back(c.p);
+    const auto adj = stats::holm_adjust(pv);
+    int win = -1;
+    for (std::size_t j = 0; j < rd.candidates.size(); ++j) {
+      auto& c = rd.candidates[j];
+      c.p_holm = adj[j];
+      c.significant = adj[j] < alpha;
+      if (c.significant && c.plausible && (win < 0 || c.p < rd.candidates[static_cast<std::size_t>(win)].p ||
+                                           (c.p == rd.candidates[static_cast<std::size_t>(win)].p && c.lr > rd.candidates[static_cast<std::size_t>(win)].lr)))
+        win = static_cast<int>(j);
+    }
+    rd.accepted = win;
+    if (win < 0) {
+      st.rounds.push_back(std::move(rd));
+      break;
+    }
+    auto& w = rd.candidates[static_cast<std::size_t>(win)];
+    const auto ci = idx[static_cast<std::size_t>(win)];
+    if (folds > 0) {
+      if (progress) progress("likelihood check: held-out trials for " + w.id + " (" + std::to_string(folds) + " folds)");
+      heldout_check(prep, folds, acc, [&](double a) { return correction_of(cands[ci], a); }, w, st.evaluations);
+    }
+    used[ci] = true;
+    acc = add(acc, correction_of(cands[ci], w.alpha));
+    cur = w.fit;
+    st.accepted.push_back(w.id);
+    st.accepted_fits.push_back(w);
+    if (progress) progress("likelihood check: accepted " + w.id);
+    st.rounds.push_back(std::move(rd));
+  }
+  st.fit = cur;
+  st.nll_final = nll_of(cur);
+  return st;
+}
+
+std::string likelihood_text(const LikelihoodStage& s) {
+  std::ostringstream o;
+  o << "\nLikelihood check (default method's likelihood of the raw positions; each candidate profiled in its amplitude,\n"
+       "D, K and noise model refitted; LR = 2 (NLL_0 - NLL_min) against chi2 with df = the mechanism's shape + gains, Holm):\n";
+  if (!s.available) {
+    o << "  not available: " << s.error << "\n";
+    return o.str();
+  }
+  for (std::size_t r = 0; r < s.rounds.size(); ++r) {
+    o << " round " << r + 1 << ":\n";
+    for (std::size_t i = 0; i < s.rounds[r].candidates.size(); ++i) {
+      const auto& c = s.rounds[r].candidates[i];
+      char line[160];
+      std::snprintf(line, sizeof line, "   %-22s LR %8.2f  df %d  p_holm %-8.2g alpha %+.2f", c.id.c_str(), c.lr, c.df, c.p_holm, c.alpha);
+      o << line;
+      if (static_cast<int>(i) == s.rounds[r].accepted)
+        o << "  <- ACCEPTED";
+      else if (c.significant)
+        o << (c.plausible ? "  significant" : "  significant, IMPLAUSIBLE (" + c.implausible_reason + ")");
+      o << "  (";
+      bool first = true;
+      for (const auto& p : c.params) {
+        o << (first ? "" : ", ") << p.name << " " << g4(p.est.value);
+        first = false;
+      }
+      o << ")\n";
+      if (c.heldout_done) {
+        char h[200];
+        std::snprintf(h, sizeof h, "     held out (%zu folds of trials): log-likelihood gain %+.3f +- %.3f nats per trial, p %.2g\n", c.fold_gain_nats.size(),
+                      c.heldout.mean, c.heldout.se, c.heldout.p_value);
+        o << h;
+      }
+    }
+  }
+  if (!s.misfit_found()) {
+    o << "  result: no significant misfit by the likelihood either\n";
+  } else {
+    o << "  result: named";
+    for (std::size_t a = 0; a < s.accepted.size(); ++a) o << (a ? ", then " : " ") << s.accepted[a];
+    o << "; NLL " << g4(s.nll_baseline) << " -> " << g4(s.nll_final) << " (" << s.evaluations << " fits of the default method)\n";
+    const auto z = s.impedance();
+    o << "  corrected estimate (" << s.fit.method << " with the extension): D [" << g4(z.d(0, 0)) << " " << g4(z.d(0, 1)) << "; " << g4(z.d(1, 0)) << " "
+      << g4(z.d(1, 1)) << "] N s/m, K [" << g4(z.k(0, 0)) << " " << g4(z.k(0, 1)) << "; " << g4(z.k(1, 0)) << " " << g4(z.k(1, 1)) << "] N/m\n";
+  }
+  return o.str();
+}
+
+nlohmann::json likelihood_json(const LikelihoodStage& s) {
+  nlohmann::json j;
+  j["available"] = s.available;
+  if (!s.available) {
+    j["error"] = s.error;
+    return j;
+  }
+  j["alpha"] = s.alpha_level;
+  j["accepted"] = s.accepted;
+  j["nll_baseline"] = s.nll_baseline;
+  j["nll_final"] = s.nll_final;
+  j["evaluations"] = s.evaluations;
+  j["rounds"] = nlohmann::json::array();
+  for (const auto& r : s.rounds) {
+    nlohmann::json jr;
+    jr["accepted"] = r.accepted >= 0 ? nlohmann::json(r.candidates[static_cast<std::size_t>(r.accepted)].id) : nlohmann::json(nullptr);
+    jr["candidates"] = nlohmann::json::array();
+    for (const auto& c : r.candidates) {
+      nlohmann::json jc = {{"id", c.id}, {"lr", c.lr}, {"df", c.df}, {"p", c.p}, {"p_holm", c.p_holm}, {"alpha", c.alpha},
+                           {"significant", c.significant}, {"plausible", c.plausible}};
+      if (!c.plausible) jc["implausible_reason"] = c.implausible_reason;
+      if (c.heldout_done)
+        jc["heldout"] = {{"fold_gain_nats_per_trial", c.fold_gain_nats}, {"mean", c.heldout.mean}, {"se", c.heldout.se}, {"p", c.heldout.p_value}};
+      for (const auto& p : c.params) jc["params"][p.name] = p.est.value;
+      jr["candidates"].push_back(jc);
+    }
+    j["rounds"].push_back(jr);
+  }
+  if (s.misfit_found()) {
+    const auto z = s.impedance();
+    j["corrected"] = {{"method", s.fit.method},
+                      {"d_nspm", {{z.d(0, 0), z.d(0, 1)}, {z.d(1, 0), z.d(1, 1)}}},
+                      {"k_npm", {{z.k(0, 0), z.k(0, 1)}, {z.k(1, 0), z.k(1, 1)}}}};
+  }
+  return j;
+}
+
+Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarPrepared& prep) {
+  Conclusion c;
+  if (s.available) {
+    c.decided_by = "likelihood";
+    c.named = s.accepted;
+    if (s.misfit_found()) {
+      c.has_corrected = true;
+      c.corrected = s.impedance();
+    }
+  } else {
+    c.decided_by = "equation_error";
+    c.named = dg.accepted;
+    const auto& f = prep.refined.available ? prep.refined.fit : prep.pem_extended;
+    if (dg.misfit_found() && f.available) {
+      c.has_corrected = true;
+      c.corrected.d = f.d;
+      c.corrected.k = f.k;
+      if (const auto* cc = dg.find_final("curl_c"); cc && std::find(dg.accepted.begin(), dg.accepted.end(), "curl_stiffness") != dg.accepted.end()) {
+        c.corrected.k(0, 1) += prep.refined.alpha * cc->est.value;
+        c.corrected.k(1, 0) -= prep.refined.alpha * cc->est.value;
+      }
+    }
+  }
+  return c;
+}
+
+std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
+  std::ostringstream o;
+  o << "\nConclusion (decided by the " << (c.decided_by == "likelihood" ? "likelihood check" : "equation-error search") << "): ";
+  if (c.named.empty()) {
+    o << "no significant misfit.\n  Detection limits of this session (90 % power, equation error; the likelihood check reaches lower):";
+    if (!dg.rounds.empty())
+      for (const auto& cs : dg.rounds.front().candidates) {
+        if (cs.gain_mde.size() != 1) continue;  // one-gain mechanisms: one number says it
+        o << " " << cs.params.back().name << " " << g4(cs.gain_mde.front()) << " " << cs.params.back().unit << ";";
+      }
+    o << "\n";
+    return o.str();
+  }
+  o << "named";
+  for (std::size_t i = 0; i < c.named.size(); ++i) o << (i ? ", then " : " ") << c.named[i];
+  o << " (equation-error search:";
+  if (dg.accepted.empty()) o << " none";
+  for (const auto& a : dg.accepted) o << " " << a;
+  o << ")\n";
+  if (c.has_corrected)
+    o << "  corrected impedance: D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; " << g4(c.corrected.d(1, 0)) << " "
+      << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " " << g4(c.corrected.k(0, 1)) << "; " << g4(c.corrected.k(1, 0)) << " "
+      << g4(c.corrected.k(1, 1)) << "] N/m\n";
+  return o.str();
+}
+
+nlohmann::json conclusion_json(const Conclusion& c) {
+  nlohmann::json j = {{"decided_by", c.decided_by}, {"named", c.named}, {"misfit", !c.named.empty()}};
+  if (c.has_corrected)
+    j["corrected"] = {{"d_nspm", {{c.corrected.d(0, 0), c.corrected.d(0, 1)}, {c.corrected.d(1, 0), c.corrected.d(1, 1)}}},
+                      {"k_npm", {{c.corrected.k(0, 0), c.corrected.k(0, 1)}, {c.corrected.k(1, 0), c.corrected.k(1, 1)}}}};
+  return j;
+}
+
+}  // namespace manip::diagnosis
