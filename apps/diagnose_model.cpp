@@ -3,9 +3,15 @@
 // Thin main: options, the single-joint front end, the engine, the reports.
 // Command line: common/cli.hpp (docs/cli.md): --version, -q, --force, the
 // exit-code table in --help.
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
+#include <limits>
+#include <numeric>
+#include <random>
 #include <optional>
 #include <string>
 #include <vector>
@@ -20,6 +26,7 @@
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/diagnosis/report.hpp"
 #include "manip/diagnosis/single_joint.hpp"
+#include "manip/estimation/report/render.hpp"
 #include "manip/version.hpp"
 
 namespace {
@@ -32,8 +39,311 @@ const char* kExitNotes =
     "    2: bad command line (also: no input, or logs and --single-joint together)\n"
     "    4: an input is unusable: missing or unreadable, a malformed line (FILE:LINE: reason), too short for\n"
     "       the cross-validation or too few perturbed trials, logs with different configurations\n"
-    "    6: the --json file exists (no --force; checked before any input is read) or cannot be written;\n"
-    "       nothing is left behind\n";
+    "    6: the --json file exists or the --plots DIR is not empty (no --force; checked before any input is\n"
+    "       read), an output cannot be written, or Python/matplotlib is missing for --plots; nothing is left\n"
+    "       behind (the text report is printed and --json written before the figures are drawn)\n";
+
+namespace fs = std::filesystem;
+using manip::diagnosis::Columns;
+using manip::diagnosis::Dataset;
+using manip::diagnosis::Diagnosis;
+
+// ---------------------------------------------------------------- held-out predictions for --plots / --json "traces"
+// The engine's folds (engine.cpp, make_blocks): trials (segment groups) in
+// time order, K folds of neighbouring trials; or one continuous record cut
+// into K contiguous folds with a guard gap between them. A sample is
+// predicted by the model fitted on the other folds (the held-out prediction
+// the fold VAF and the gains are computed from).
+struct PredBlock {
+  std::size_t seg = 0, begin = 0, end = 0;
+  int fold = 0;
+};
+
+std::vector<PredBlock> engine_folds(const Dataset& d, const manip::diagnosis::EngineOptions& opt, std::size_t history) {
+  std::vector<PredBlock> out;
+  const int K = opt.folds;
+  const auto nseg = d.segments.size();
+  std::vector<int> order;  // units in order of first appearance
+  std::vector<std::size_t> rank(nseg);
+  for (std::size_t s = 0; s < nseg; ++s) {
+    const int key = d.segments[s].group >= 0 ? d.segments[s].group : -1 - static_cast<int>(s);
+    auto it = std::find(order.begin(), order.end(), key);
+    if (it == order.end()) {
+      order.push_back(key);
+      it = order.end() - 1;
+    }
+    rank[s] = static_cast<std::size_t>(it - order.begin());
+  }
+  if (order.size() >= static_cast<std::size_t>(K)) {
+    for (std::size_t s = 0; s < nseg; ++s)
+      out.push_back({s, d.segments[s].first + history, d.segments[s].last,
+                     static_cast<int>(rank[s] * static_cast<std::size_t>(K) / order.size())});
+    return out;
+  }
+  const auto& g = d.segments.at(0);
+  const auto guard = static_cast<std::size_t>(std::ceil(opt.guard_s / d.dt_s));
+  const std::size_t lo = g.first + history, L = g.last - lo;
+  for (int k = 0; k < K; ++k) {
+    std::size_t a = lo + L * static_cast<std::size_t>(k) / static_cast<std::size_t>(K);
+    std::size_t b = lo + L * static_cast<std::size_t>(k + 1) / static_cast<std::size_t>(K);
+    if (k > 0) a += guard / 2;
+    if (k < K - 1) b -= (guard + 1) / 2;
+    out.push_back({0, a, b, k});
+  }
+  return out;
+}
+
+// As the engine's solve: column-scaled LDLT, minimum-norm fallback.
+Eigen::VectorXd solve_scaled(const Eigen::MatrixXd& G, const Eigen::VectorXd& h) {
+  const Eigen::Index p = G.rows();
+  Eigen::VectorXd s(p);
+  for (Eigen::Index i = 0; i < p; ++i) s(i) = G(i, i) > 0 ? 1.0 / std::sqrt(G(i, i)) : 1.0;
+  const Eigen::MatrixXd Gs = s.asDiagonal() * G * s.asDiagonal();
+  const Eigen::VectorXd hs = s.asDiagonal() * h;
+  Eigen::LDLT<Eigen::MatrixXd> ldlt(Gs);
+  const Eigen::VectorXd z = (ldlt.info() == Eigen::Success && ldlt.isPositive() && ldlt.rcond() > 1e-13)
+                                ? Eigen::VectorXd(ldlt.solve(hs))
+                                : Eigen::VectorXd(Gs.completeOrthogonalDecomposition().solve(hs));
+  return s.asDiagonal() * z;
+}
+
+// Held-out prediction of the target, [segment][sample] (NaN outside the folds),
+// for the baseline plus the given extra columns.
+std::vector<std::vector<double>> heldout_prediction(const Dataset& d, const std::vector<PredBlock>& blocks, int folds,
+                                                    const std::vector<const Columns*>& extras) {
+  const auto cols = [&](std::size_t seg) {
+    std::vector<const std::vector<double>*> c;
+    for (const auto& b : d.segments[seg].base) c.push_back(&b);
+    for (const auto* e : extras)
+      for (const auto& col : (*e)[seg]) c.push_back(&col);
+    return c;
+  };
+  const auto p = static_cast<Eigen::Index>(cols(0).size());
+  std::vector<Eigen::MatrixXd> G(static_cast<std::size_t>(folds), Eigen::MatrixXd::Zero(p, p));
+  std::vector<Eigen::VectorXd> h(static_cast<std::size_t>(folds), Eigen::VectorXd::Zero(p));
+  Eigen::VectorXd x(p);
+  for (const auto& b : blocks) {
+    const auto c = cols(b.seg);
+    const auto& y = d.segments[b.seg].y;
+    auto& Gk = G[static_cast<std::size_t>(b.fold)];
+    auto& hk = h[static_cast<std::size_t>(b.fold)];
+    for (std::size_t i = b.begin; i < b.end; ++i) {
+      for (Eigen::Index j = 0; j < p; ++j) x(j) = (*c[static_cast<std::size_t>(j)])[i];
+      Gk.selfadjointView<Eigen::Lower>().rankUpdate(x);
+      hk += y[i] * x;
+    }
+  }
+  Eigen::MatrixXd Gall = Eigen::MatrixXd::Zero(p, p);
+  Eigen::VectorXd hall = Eigen::VectorXd::Zero(p);
+  for (int k = 0; k < folds; ++k) {
+    G[static_cast<std::size_t>(k)] = G[static_cast<std::size_t>(k)].selfadjointView<Eigen::Lower>();
+    Gall += G[static_cast<std::size_t>(k)];
+    hall += h[static_cast<std::size_t>(k)];
+  }
+  std::vector<Eigen::VectorXd> theta;
+  for (int k = 0; k < folds; ++k)
+    theta.push_back(solve_scaled(Gall - G[static_cast<std::size_t>(k)], hall - h[static_cast<std::size_t>(k)]));
+  std::vector<std::vector<double>> out(d.segments.size());
+  for (std::size_t s = 0; s < d.segments.size(); ++s)
+    out[s].assign(d.segments[s].y.size(), std::numeric_limits<double>::quiet_NaN());
+  for (const auto& b : blocks) {
+    const auto c = cols(b.seg);
+    const auto& th = theta[static_cast<std::size_t>(b.fold)];
+    for (std::size_t i = b.begin; i < b.end; ++i) {
+      double v = 0.0;
+      for (Eigen::Index j = 0; j < p; ++j) v += th(j) * (*c[static_cast<std::size_t>(j)])[i];
+      out[b.seg][i] = v;
+    }
+  }
+  return out;
+}
+
+double vaf_of(const std::vector<double>& y, const std::vector<double>& yhat) {
+  double m = 0.0;
+  for (double v : y) m += v;
+  m /= static_cast<double>(y.size());
+  double sse = 0.0, sst = 0.0;
+  for (std::size_t i = 0; i < y.size(); ++i) {
+    sse += (y[i] - yhat[i]) * (y[i] - yhat[i]);
+    sst += (y[i] - m) * (y[i] - m);
+  }
+  return sst > 0 ? 1.0 - sse / sst : 0.0;
+}
+
+// The JSON "traces" section (docs/diagnosis.md, "Figures (--plots)"): held-out
+// predictions of the baseline and of the extended model.
+//  single joint: one fold (the one of median baseline fold VAF), its first
+//    <= 3 s: t_s, measured (the smoothed target the models predict), baseline, extended;
+//  manipulandum: per time after onset (shared window), per axis: the mean
+//    held-out residual over trials and its 95 % half-width (1.96 SD/sqrt(n)),
+//    before and after; and three example trials (first, middle, last used).
+nlohmann::json make_traces(const Dataset& d, const Diagnosis& res, const std::vector<std::unique_ptr<manip::diagnosis::Mechanism>>& lib,
+                           const manip::diagnosis::EngineOptions& eo) {
+  std::size_t history = 0;
+  for (const auto& m : lib)
+    if (m->not_applicable(d).empty()) history = std::max(history, m->history_samples(d));
+  const auto blocks = engine_folds(d, eo, history);
+  std::vector<Columns> ext_cols;
+  for (std::size_t a = 0; a < res.accepted.size(); ++a)
+    for (const auto& m : lib)
+      if (m->id() == res.accepted[a]) ext_cols.push_back(m->columns(d, res.accepted_settings[a]));
+  std::vector<const Columns*> ext;
+  for (const auto& c : ext_cols) ext.push_back(&c);
+  const auto p0 = heldout_prediction(d, blocks, eo.folds, {});
+  const bool extended = res.misfit_found();
+  const auto p1 = extended ? heldout_prediction(d, blocks, eo.folds, ext) : p0;
+  // The replicated folds must be the engine's: the fold VAFs recomputed from
+  // these predictions equal the report's (else the traces are flagged and a
+  // warning printed; tests check the flag).
+  const auto fold_vaf = [&](const std::vector<std::vector<double>>& pred) {
+    std::vector<double> v;
+    for (int k = 0; k < eo.folds; ++k) {
+      std::vector<double> yy, hh;
+      for (const auto& b : blocks)
+        if (b.fold == k)
+          for (std::size_t i = b.begin; i < b.end; ++i) {
+            yy.push_back(d.segments[b.seg].y[i]);
+            hh.push_back(pred[b.seg][i]);
+          }
+      v.push_back(vaf_of(yy, hh));
+    }
+    return v;
+  };
+  const auto same = [](const std::vector<double>& a, const std::vector<double>& b) {
+    if (a.size() != b.size()) return false;
+    for (std::size_t i = 0; i < a.size(); ++i)
+      if (std::fabs(a[i] - b[i]) > 1e-6) return false;
+    return true;
+  };
+  const bool matches = same(fold_vaf(p0), res.baseline_heldout.fold_vaf) && (!extended || same(fold_vaf(p1), res.final_heldout.fold_vaf));
+  if (!matches) std::cerr << "diagnose_model: warning: the traces' held-out predictions do not reproduce the engine's fold VAFs\n";
+  const auto opt = [&](const std::vector<double>& v) { return extended ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  nlohmann::json t;
+  t["prediction"] = "held-out: each sample predicted by the model fitted on the other folds (the engine's folds)";
+  t["unit"] = d.target_unit;
+  t["extended_model"] = res.accepted;
+  t["matches_engine_folds"] = matches;
+  if (!d.is_planar()) {
+    std::vector<std::size_t> idx(res.baseline_heldout.fold_vaf.size());
+    std::iota(idx.begin(), idx.end(), 0);
+    std::sort(idx.begin(), idx.end(), [&](auto a, auto b) { return res.baseline_heldout.fold_vaf[a] < res.baseline_heldout.fold_vaf[b]; });
+    const int fold = idx.empty() ? 0 : static_cast<int>(idx[idx.size() / 2]);
+    std::vector<double> ts, y, b0, b1;
+    const auto max_n = static_cast<std::size_t>(std::ceil(3.0 / d.dt_s));
+    for (const auto& b : blocks) {
+      if (b.fold != fold) continue;
+      const auto& g = d.segments[b.seg];
+      for (std::size_t i = b.begin; i < b.end && ts.size() < max_n; ++i) {
+        ts.push_back(g.t0_s + static_cast<double>(i) * d.dt_s);
+        y.push_back(g.y[i]);
+        b0.push_back(p0[b.seg][i]);
+        b1.push_back(p1[b.seg][i]);
+      }
+    }
+    t["kind"] = "single_joint";
+    t["fold"] = fold;
+    t["t_s"] = ts;
+    t["measured"] = y;
+    t["baseline"] = b0;
+    t["extended"] = opt(b1);
+    t["vaf_baseline"] = vaf_of(y, b0);
+    t["vaf_extended"] = extended ? nlohmann::json(vaf_of(y, b1)) : nlohmann::json(nullptr);
+    return t;
+  }
+  // Manipulandum: segments (trial, axis); the window after onset shared by all.
+  std::size_t n = std::numeric_limits<std::size_t>::max();
+  for (const auto& b : blocks) n = std::min(n, b.end);
+  const std::size_t k0 = history;
+  std::vector<double> ts;
+  for (std::size_t k = k0; k < n; ++k) ts.push_back(static_cast<double>(k) * d.dt_s);
+  t["kind"] = "manipulandum";
+  t["t_after_onset_s"] = ts;
+  const auto band = [&](const std::vector<std::vector<double>>& pred, nlohmann::json& mean_out, nlohmann::json& half_out) {
+    mean_out = nlohmann::json::array();
+    half_out = nlohmann::json::array();
+    for (int axis = 0; axis < 2; ++axis) {
+      std::vector<double> mean(ts.size(), 0.0), sq(ts.size(), 0.0), half(ts.size(), 0.0);
+      double cnt = 0;
+      for (std::size_t s = 0; s < d.segments.size(); ++s) {
+        if (d.segments[s].axis != axis) continue;
+        cnt += 1;
+        for (std::size_t k = k0; k < n; ++k) {
+          const double e = d.segments[s].y[k] - pred[s][k];
+          mean[k - k0] += e;
+          sq[k - k0] += e * e;
+        }
+      }
+      for (std::size_t i = 0; i < ts.size(); ++i) {
+        mean[i] /= cnt;
+        const double var = cnt > 1 ? std::max(0.0, (sq[i] - cnt * mean[i] * mean[i]) / (cnt - 1)) : 0.0;
+        half[i] = 1.96 * std::sqrt(var / cnt);
+      }
+      mean_out.push_back(mean);
+      half_out.push_back(half);
+    }
+  };
+  t["n_trials"] = d.planar.size();
+  band(p0, t["mean_residual_before"], t["ci95_halfwidth_before"]);
+  if (extended) {
+    band(p1, t["mean_residual_after"], t["ci95_halfwidth_after"]);
+  } else {
+    t["mean_residual_after"] = nullptr;
+    t["ci95_halfwidth_after"] = nullptr;
+  }
+  std::vector<int> picks{0, static_cast<int>(d.planar.size()) / 2, static_cast<int>(d.planar.size()) - 1};
+  picks.erase(std::unique(picks.begin(), picks.end()), picks.end());
+  t["trials"] = nlohmann::json::array();
+  for (int g : picks) {
+    nlohmann::json jt = {{"trial", d.planar[static_cast<std::size_t>(g)].trial}, {"log", d.planar[static_cast<std::size_t>(g)].log}};
+    nlohmann::json y = nlohmann::json::array(), b0 = nlohmann::json::array(), b1 = nlohmann::json::array();
+    for (int axis = 0; axis < 2; ++axis)
+      for (std::size_t s = 0; s < d.segments.size(); ++s)
+        if (d.segments[s].group == g && d.segments[s].axis == axis) {
+          const auto& seg = d.segments[s];
+          y.push_back(std::vector<double>(seg.y.begin() + static_cast<long>(k0), seg.y.begin() + static_cast<long>(n)));
+          b0.push_back(std::vector<double>(p0[s].begin() + static_cast<long>(k0), p0[s].begin() + static_cast<long>(n)));
+          b1.push_back(std::vector<double>(p1[s].begin() + static_cast<long>(k0), p1[s].begin() + static_cast<long>(n)));
+        }
+    jt["target"] = y;
+    jt["baseline"] = b0;
+    jt["extended"] = extended ? b1 : nlohmann::json(nullptr);
+    t["trials"].push_back(jt);
+  }
+  return t;
+}
+
+// --plots DIR: refused before any input is read when it exists and is not
+// empty (unless --force) or is not a directory (as estimate_impedance).
+void check_plots_dir(const std::string& dir, bool force) {
+  std::error_code e;
+  if (fs::exists(dir, e) && !fs::is_directory(dir, e)) throw manip::OutputError("--plots " + dir + ": exists and is not a directory");
+  if (!force && fs::is_directory(dir, e) && !fs::is_empty(dir, e))
+    throw manip::OutputError("--plots " + dir + ": exists and is not empty (pass --force to overwrite its files); nothing was read");
+}
+
+// The figures: the report JSON (with traces) into a temporary directory, then
+// python -m manipplot.diagnosis through the estimator's render mechanism
+// (files moved into DIR only when all were drawn; an existing file is
+// replaced only with --force).
+void draw_plots(const nlohmann::json& j, const std::string& dir, bool force) {
+  std::error_code e;
+  std::mt19937_64 rng(std::random_device{}());
+  const fs::path tmp = fs::temp_directory_path(e) / ("diagnose_model_" + std::to_string(rng() % 1000000000));
+  fs::create_directories(tmp, e);
+  if (e) throw manip::OutputError(tmp.string() + ": cannot create a temporary directory (" + e.message() + ")");
+  struct Cleanup {
+    fs::path p;
+    ~Cleanup() {
+      std::error_code x;
+      fs::remove_all(p, x);
+    }
+  } cleanup{tmp};
+  const std::string results = (tmp / "diagnosis.json").string();
+  manip::write_file_atomically(results, j.dump(1) + "\n", true);
+  const auto r = manip::estimation::render_module_into("manipplot.diagnosis", {results}, "png,pdf", dir, force);
+  for (const auto& n : r.notes) std::cerr << "diagnose_model: " << n << "\n";
+  if (r.manipplot_exit != 0) throw manip::OutputError("--plots " + dir + ": some figures were not drawn (see above)");
+}
 
 int run(int argc, char** argv) {
   using namespace manip;
@@ -43,7 +353,7 @@ int run(int argc, char** argv) {
                    "the gain (docs/diagnosis.md)",
                "diagnose_model"};
   app.footer(kExitNotes);
-  std::string single_joint, json_out;
+  std::string single_joint, json_out, plots_dir;
   std::vector<std::string> logs;
   cli::Common c;
   cli::add_version(app, "diagnose_model");
@@ -62,6 +372,9 @@ int run(int argc, char** argv) {
   app.add_flag("--no-default-method", no_pem, "manipulandum: do not fit the estimator's default method (pem) for comparison");
   app.add_option("--t-est", t_est, "manipulandum: estimation window after onset (s), as estimate_impedance")->check(CLI::Range(0.05, 1.0));
   app.add_option("--json", json_out, "write the report as JSON to this file (an existing file is kept unless --force)");
+  app.add_option("--plots", plots_dir,
+                 "draw the figures (PNG + PDF; python -m manipplot.diagnosis, docs/diagnosis.md) into DIR, with diagnosis.json "
+                 "(a non-empty DIR is refused unless --force)");
   cli::add_force(app, c.force);
   cli::add_quiet(app, c.quiet)->description("no progress on stderr (only warnings and errors)");
   app.add_option("--torque-sign", sign, "auto (K > 0 decides), +1 or -1")->check(CLI::IsMember({"auto", "+1", "-1", "1"}));
@@ -86,6 +399,8 @@ int run(int argc, char** argv) {
   // a failed run leaves neither a truncated file nor a temporary.
   std::optional<AtomicOutput> json_file;
   if (!json_out.empty()) json_file.emplace(json_out, c.force);
+  if (!plots_dir.empty()) check_plots_dir(plots_dir, c.force);
+  const bool want_json = json_file.has_value() || !plots_dir.empty();
   const auto write_json = [&](const nlohmann::json& j) {
     const std::string text = j.dump(2) + "\n";
     if (std::fputs(text.c_str(), json_file->stream()) < 0) throw OutputError(json_out + ": write failed");
@@ -128,10 +443,12 @@ int run(int argc, char** argv) {
     const auto pr = diagnosis::planar_report(prep, res, lib);
     ctx.extra_text = pr.text;
     std::cout << diagnosis::text_report(res, ctx);
-    if (json_file) {
+    if (want_json) {
       auto j = diagnosis::json_report(res, ctx);
       j["manipulandum"] = pr.json;
-      write_json(j);
+      j["traces"] = make_traces(prep.data, res, lib, eo);
+      if (json_file) write_json(j);
+      if (!plots_dir.empty()) draw_plots(j, plots_dir, c.force);
     }
     return ec::kOk;
   }
@@ -153,7 +470,12 @@ int run(int argc, char** argv) {
                 prep.sign_flipped_automatically ? " (flipped: the record stores the reaction torque, baseline K was negative)" : "");
   ctx.preprocessing = buf;
   std::cout << diagnosis::text_report(res, ctx);
-  if (json_file) write_json(diagnosis::json_report(res, ctx));
+  if (want_json) {
+    auto j = diagnosis::json_report(res, ctx);
+    j["traces"] = make_traces(prep.data, res, lib, eo);
+    if (json_file) write_json(j);
+    if (!plots_dir.empty()) draw_plots(j, plots_dir, c.force);
+  }
   return ec::kOk;
 }
 
