@@ -406,8 +406,9 @@ class App(unittest.TestCase):
             if not os.path.exists(p):
                 raise AssertionError("%s not built (cmake --build build --target diagnose_model make_hidden_session)" % p)
 
-    def run_app(self, args, rc=0):
-        r = subprocess.run([DIAG, "-q"] + args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=120)
+    def run_app(self, args, rc=0, env=None):
+        r = subprocess.run([DIAG, "-q"] + args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=120,
+                           env=dict(os.environ, **(env or {})))
         self.assertEqual(r.returncode, rc, r.stderr[-3000:])
         return r
 
@@ -468,6 +469,15 @@ class App(unittest.TestCase):
         self.run_app(["--single-joint", csv, "--folds", "5", "--bootstrap", "50", "--plots", out, "--force"])
         self.assertEqual(set(snapshot(out)), set(before))
         self.assertEqual([f for f in os.listdir(d) if f.startswith(".plots.partial")], [])
+        # no usable Python: the report still printed, then exit 6 with one line; no DIR left behind
+        nopy = os.path.join(d, "nopy")
+        r = self.run_app(["--single-joint", csv, "--folds", "5", "--bootstrap", "50", "--plots", nopy], rc=6,
+                         env={"MANIP_PYTHON": "/nonexistent/python"})
+        self.assertIn("Result:", r.stdout)
+        self.assertEqual(r.stderr.strip().splitlines(),
+                         ["diagnose_model: --plots %s: not written: Python interpreter '/nonexistent/python' cannot be run "
+                          "(set MANIP_PYTHON or run scripts/setup.sh)" % nopy])
+        self.assertFalse(os.path.exists(nopy))
 
     def test_manipulandum(self):
         d = tmpdir(self)
