@@ -12,7 +12,6 @@ import tempfile
 import unittest
 
 import numpy as np
-from matplotlib.lines import Line2D
 
 from manipplot import diagnosis as DG
 
