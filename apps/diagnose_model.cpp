@@ -8,14 +8,14 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <functional>
+#include <iostream>
 #include <limits>
 #include <map>
 #include <numeric>
-#include <stdexcept>
-#include <random>
 #include <optional>
+#include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
