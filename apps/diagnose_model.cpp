@@ -5,8 +5,10 @@
 // exit-code table in --help.
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <optional>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -21,6 +23,7 @@
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/diagnosis/report.hpp"
 #include "manip/diagnosis/single_joint.hpp"
+#include "manip/estimation/report/render.hpp"
 #include "manip/version.hpp"
 
 namespace {
@@ -33,8 +36,44 @@ const char* kExitNotes =
     "    2: bad command line (also: no input, or logs and --single-joint together)\n"
     "    4: an input is unusable: missing or unreadable, a malformed line (FILE:LINE: reason), too short for\n"
     "       the cross-validation or too few perturbed trials, logs with different configurations\n"
-    "    6: the --json file exists (no --force; checked before any input is read) or cannot be written;\n"
-    "       nothing is left behind\n";
+    "    6: the --json file exists or the --plots DIR is not empty (no --force; checked before any input is\n"
+    "       read), an output cannot be written, or Python/matplotlib is missing for --plots; nothing is left\n"
+    "       behind (the text report is printed and --json written before the figures are drawn)\n";
+
+namespace fs = std::filesystem;
+
+// --plots DIR: refused before any input is read when it exists and is not
+// empty (unless --force) or is not a directory (as estimate_impedance).
+void check_plots_dir(const std::string& dir, bool force) {
+  std::error_code e;
+  if (fs::exists(dir, e) && !fs::is_directory(dir, e)) throw manip::OutputError("--plots " + dir + ": exists and is not a directory");
+  if (!force && fs::is_directory(dir, e) && !fs::is_empty(dir, e))
+    throw manip::OutputError("--plots " + dir + ": exists and is not empty (pass --force to overwrite its files); nothing was read");
+}
+
+// The figures: the report JSON (with traces) into a temporary directory, then
+// python -m manipplot.diagnosis through the estimator's render mechanism
+// (files moved into DIR only when all were drawn; an existing file is
+// replaced only with --force).
+void draw_plots(const nlohmann::json& j, const std::string& dir, bool force) {
+  std::error_code e;
+  std::mt19937_64 rng(std::random_device{}());
+  const fs::path tmp = fs::temp_directory_path(e) / ("diagnose_model_" + std::to_string(rng() % 1000000000));
+  fs::create_directories(tmp, e);
+  if (e) throw manip::OutputError(tmp.string() + ": cannot create a temporary directory (" + e.message() + ")");
+  struct Cleanup {
+    fs::path p;
+    ~Cleanup() {
+      std::error_code x;
+      fs::remove_all(p, x);
+    }
+  } cleanup{tmp};
+  const std::string results = (tmp / "diagnosis.json").string();
+  manip::write_file_atomically(results, j.dump(1) + "\n", true);
+  const auto r = manip::estimation::render_module_into("manipplot.diagnosis", {results}, "png,pdf", dir, force);
+  for (const auto& n : r.notes) std::cerr << "diagnose_model: " << n << "\n";
+  if (r.manipplot_exit != 0) throw manip::OutputError("--plots " + dir + ": some figures were not drawn (see above)");
+}
 
 int run(int argc, char** argv) {
   using namespace manip;
@@ -44,7 +83,7 @@ int run(int argc, char** argv) {
                    "the gain (docs/diagnosis.md)",
                "diagnose_model"};
   app.footer(kExitNotes);
-  std::string single_joint, json_out;
+  std::string single_joint, json_out, plots_dir;
   std::vector<std::string> logs;
   cli::Common c;
   cli::add_version(app, "diagnose_model");
@@ -63,6 +102,9 @@ int run(int argc, char** argv) {
   app.add_flag("--no-default-method", no_pem, "manipulandum: do not fit the estimator's default method (pem) for comparison");
   app.add_option("--t-est", t_est, "manipulandum: estimation window after onset (s), as estimate_impedance")->check(CLI::Range(0.05, 1.0));
   app.add_option("--json", json_out, "write the report as JSON to this file (an existing file is kept unless --force)");
+  app.add_option("--plots", plots_dir,
+                 "draw the figures (PNG + PDF; python -m manipplot.diagnosis, docs/diagnosis.md) into DIR, with diagnosis.json "
+                 "(a non-empty DIR is refused unless --force)");
   cli::add_force(app, c.force);
   cli::add_quiet(app, c.quiet)->description("no progress on stderr (only warnings and errors)");
   app.add_option("--torque-sign", sign, "auto (K > 0 decides), +1 or -1")->check(CLI::IsMember({"auto", "+1", "-1", "1"}));
@@ -87,6 +129,9 @@ int run(int argc, char** argv) {
   // a failed run leaves neither a truncated file nor a temporary.
   std::optional<AtomicOutput> json_file;
   if (!json_out.empty()) json_file.emplace(json_out, c.force);
+  if (!plots_dir.empty()) check_plots_dir(plots_dir, c.force);
+  const bool want_json = json_file.has_value() || !plots_dir.empty();
+  eo.keep_predictions = want_json;  // the JSON "traces" (figures)
   const auto write_json = [&](const nlohmann::json& j) {
     const std::string text = j.dump(2) + "\n";
     if (std::fputs(text.c_str(), json_file->stream()) < 0) throw OutputError(json_out + ": write failed");
@@ -133,12 +178,14 @@ int run(int argc, char** argv) {
     const auto pr = diagnosis::planar_report(prep, res, lib);
     ctx.extra_text = pr.text + diagnosis::likelihood_text(lk) + diagnosis::conclusion_text(concl, res);
     std::cout << diagnosis::text_report(res, ctx);
-    if (json_file) {
+    if (want_json) {
       auto j = diagnosis::json_report(res, ctx);
       j["manipulandum"] = pr.json;
       j["likelihood"] = diagnosis::likelihood_json(lk);
       j["conclusion"] = diagnosis::conclusion_json(concl);
-      write_json(j);
+      j["traces"] = diagnosis::traces_json(prep.data, res);
+      if (json_file) write_json(j);
+      if (!plots_dir.empty()) draw_plots(j, plots_dir, c.force);
     }
     return ec::kOk;
   }
@@ -160,7 +207,12 @@ int run(int argc, char** argv) {
                 prep.sign_flipped_automatically ? " (flipped: the record stores the reaction torque, baseline K was negative)" : "");
   ctx.preprocessing = buf;
   std::cout << diagnosis::text_report(res, ctx);
-  if (json_file) write_json(diagnosis::json_report(res, ctx));
+  if (want_json) {
+    auto j = diagnosis::json_report(res, ctx);
+    j["traces"] = diagnosis::traces_json(prep.data, res);
+    if (json_file) write_json(j);
+    if (!plots_dir.empty()) draw_plots(j, plots_dir, c.force);
+  }
   return ec::kOk;
 }
 

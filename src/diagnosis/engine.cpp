@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <sstream>
 
@@ -411,6 +412,33 @@ std::vector<Block> make_blocks(const Dataset& d, const EngineOptions& opt, std::
   return blocks;
 }
 
+// Held-out prediction: fold k's samples predicted by model_of(k) fitted on
+// the other folds (NaN outside the blocks).
+std::vector<std::vector<double>> heldout_predict(const Dataset& d, const std::vector<Block>& blocks, int folds,
+                                                 const std::function<Model(int)>& model_of) {
+  std::vector<std::vector<double>> out(d.segments.size());
+  for (std::size_t s = 0; s < d.segments.size(); ++s) out[s].assign(d.segments[s].y.size(), std::numeric_limits<double>::quiet_NaN());
+  for (int k = 0; k < folds; ++k) {
+    const Model m = model_of(k);
+    const auto bs = block_stats(d, m, blocks);
+    Stats tr;
+    tr.zero(m.p(d));
+    for (std::size_t b = 0; b < blocks.size(); ++b)
+      if (blocks[b].fold != k) tr.add(bs[b]);
+    const VectorXd th = solve(tr.G, tr.h);
+    for (const auto& bl : blocks) {
+      if (bl.fold != k) continue;
+      const auto c = m.cols(d, bl.seg);
+      for (std::size_t i = bl.begin; i < bl.end; ++i) {
+        double v = 0.0;
+        for (std::size_t j = 0; j < c.size(); ++j) v += th(static_cast<Eigen::Index>(j)) * (*c[j])[i];
+        out[bl.seg][i] = v;
+      }
+    }
+  }
+  return out;
+}
+
 // Cluster-robust (sandwich) covariance of the least-squares parameters, with
 // the clusters given by the blocks' bootstrap units (Liang & Zeger 1986;
 // small-sample factor G/(G-1)): V = A^-1 (sum_g s_g s_g') A^-1, A = X'X,
@@ -521,6 +549,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
   std::vector<std::size_t> accepted_idx;
   FoldEval fe_cur = fe_base;
   std::vector<bool> used(lib.size(), false);
+  std::vector<std::size_t> last_fold_setting;  // per fold: the last accepted mechanism's grid index chosen on the training folds
   for (std::size_t round = 0; round < lib.size(); ++round) {
     Round rd;
     const Eigen::Index p = model.p(d);
@@ -538,6 +567,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     for (const auto& b : bs) tot.add(b);
     std::vector<std::size_t> cand_lib;
     std::vector<std::vector<double>> cand_fold_sse;
+    std::vector<std::vector<std::size_t>> cand_fold_setting;
     for (std::size_t mi = 0; mi < lib.size(); ++mi) {
       if (used[mi]) continue;
       const auto& mech = *lib[mi];
@@ -554,6 +584,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       const auto grid = mech.grid(d);
       // Per setting: train/test stats per fold (sums of the per-block cross statistics).
       std::vector<double> best_tr(static_cast<std::size_t>(opt.folds), std::numeric_limits<double>::infinity());
+      std::vector<std::size_t> best_fold_s(static_cast<std::size_t>(opt.folds), 0);
       std::vector<double> best_te_sse(static_cast<std::size_t>(opt.folds), 0.0);
       double best_all = std::numeric_limits<double>::infinity();
       std::size_t best_all_s = 0;
@@ -586,6 +617,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
           const double sse_tr = sse_of(atr, tk);
           if (sse_tr < best_tr[ku]) {
             best_tr[ku] = sse_tr;
+            best_fold_s[ku] = s;
             best_te_sse[ku] = sse_of(augment(te_fold[ku], cfold[ku]), tk);
           }
         }
@@ -617,6 +649,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       }
       cand_lib.push_back(mi);
       cand_fold_sse.push_back(best_te_sse);
+      cand_fold_setting.push_back(best_fold_s);
       rd.candidates.push_back(cs);
     }
     // Holm over the applicable candidates of this round.
@@ -688,7 +721,28 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     accepted_cols.push_back(lib[mi]->columns(d, wc.setting));
     model.extras.push_back(&accepted_cols.back());
     fe_cur.sse_test = cand_fold_sse[winner_c];
+    last_fold_setting = cand_fold_setting[winner_c];
     out.rounds.push_back(std::move(rd));
+  }
+
+  if (opt.keep_predictions) {
+    for (const auto& b : blocks) out.predictions.spans.push_back({b.seg, b.begin, b.end, b.fold});
+    out.predictions.baseline = heldout_predict(d, blocks, opt.folds, [](int) { return Model{}; });
+    if (!accepted_idx.empty()) {
+      // The last accepted mechanism with its shape chosen per fold (its fold
+      // gains were scored so), the earlier ones at their full-data shape.
+      const auto& last = *lib[accepted_idx.back()];
+      const auto grid = last.grid(d);
+      std::map<std::size_t, Columns> per_setting;
+      for (const auto s : last_fold_setting)
+        if (!per_setting.count(s)) per_setting.emplace(s, last.columns(d, grid[s]));
+      out.predictions.extended = heldout_predict(d, blocks, opt.folds, [&](int k) {
+        Model m;
+        for (std::size_t a = 0; a + 1 < accepted_cols.size(); ++a) m.extras.push_back(&accepted_cols[a]);
+        m.extras.push_back(&per_setting.at(last_fold_setting[static_cast<std::size_t>(k)]));
+        return m;
+      });
+    }
   }
 
   // --- final model, held-out gain

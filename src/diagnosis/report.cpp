@@ -195,6 +195,7 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
   j["final"]["heldout_vaf"] = jint(d.final_heldout.vaf);
   j["final"]["heldout_nrmse"] = jint(d.final_heldout.nrmse);
   j["final"]["heldout_gain"] = jint(d.heldout_gain);
+  j["final"]["fold_vaf"] = d.final_heldout.fold_vaf;
   j["final"]["target_rms"] = d.target_rms;
   j["final"]["contribution_rms"] = d.contribution_rms;
   j["final"]["params"] = nlohmann::json::array();

@@ -45,6 +45,9 @@ struct EngineOptions {
   // mechanism's signature nearly as well (Δx(t − τ) and Δẋ(t − τ) span
   // Δẍ-like shapes), and names the wrong cause.
   bool prefer_simpler = false;
+  // Keep the held-out predictions of the baseline and the extended model
+  // (Diagnosis::predictions; --plots and the JSON "traces").
+  bool keep_predictions = false;
 };
 
 struct Interval {
@@ -114,6 +117,19 @@ struct HeldOut {
   std::vector<double> fold_vaf;
 };
 
+// Held-out predictions of the target: every usable sample predicted by the
+// model fitted on the other folds, exactly as the engine scores the folds
+// (the last accepted mechanism's shape chosen per fold on the training folds,
+// the earlier ones at their full-data shape).
+struct HeldOutPredictions {
+  struct Span {
+    std::size_t seg = 0, begin = 0, end = 0;  // samples [begin, end) of segment seg
+    int fold = 0;
+  };
+  std::vector<Span> spans;                            // the engine's blocks
+  std::vector<std::vector<double>> baseline, extended;  // [segment][sample], NaN outside the spans; extended empty without a misfit
+};
+
 struct Diagnosis {
   std::string source;
   std::size_t n_used = 0;
@@ -133,6 +149,7 @@ struct Diagnosis {
   // model, and of the target: "how much of the torque is the reflex".
   std::vector<double> contribution_rms;
   double target_rms = 0.0;
+  HeldOutPredictions predictions;  // EngineOptions::keep_predictions
   double seconds = 0.0;
   [[nodiscard]] bool misfit_found() const { return !accepted.empty(); }
   [[nodiscard]] const ParamEstimate* find_final(const std::string& name) const;

@@ -20,4 +20,14 @@ struct ReportContext {
 [[nodiscard]] std::string text_report(const Diagnosis& d, const ReportContext& ctx);
 [[nodiscard]] nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx);
 
+// The JSON "traces" section (docs/diagnosis.md, "Figures (--plots)") from the
+// engine's held-out predictions (EngineOptions::keep_predictions):
+//  single joint: one fold (the one of median baseline fold VAF), its first
+//    <= 3 s: t_s, measured (the smoothed target the models predict), baseline, extended;
+//  manipulandum: per time after onset (shared window), per axis: the mean
+//    held-out residual over trials and its 95 % half-width (1.96 SD/sqrt(n)),
+//    before and after; and three example trials (first, middle, last used).
+// `matches_engine_folds`: the fold VAFs recomputed from the predictions equal the report's.
+[[nodiscard]] nlohmann::json traces_json(const Dataset& d, const Diagnosis& res);
+
 }  // namespace manip::diagnosis

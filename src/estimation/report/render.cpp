@@ -168,6 +168,13 @@ std::string python_unavailable_reason() {
 }
 
 RenderResult render_plots(const RenderInputs& in, const std::string& out_dir, bool force) {
+  std::vector<std::string> args{in.results_json};
+  add_inputs(args, in);
+  return render_module_into("manipplot.plots", args, "png,pdf,svg", out_dir, force);
+}
+
+RenderResult render_module_into(const std::string& module, const std::vector<std::string>& args, const std::string& formats,
+                                const std::string& out_dir, bool force) {
   const std::string what = "--plots " + out_dir;
   require_python(what);
   // Drawn into a fresh sibling directory; the files are moved into out_dir
@@ -189,10 +196,10 @@ RenderResult render_plots(const RenderInputs& in, const std::string& out_dir, bo
       fs::remove_all(p, e);
     }
   } cleanup{tmp};
-  std::vector<std::string> a{python_interpreter(), "-m", "manipplot.plots", in.results_json};
-  add_inputs(a, in);
-  a.insert(a.end(), {"-o", tmp.string(), "--format", "png,pdf,svg"});
-  RenderResult r = finish(run(a), "manipplot.plots", what);
+  std::vector<std::string> a{python_interpreter(), "-m", module};
+  a.insert(a.end(), args.begin(), args.end());
+  a.insert(a.end(), {"-o", tmp.string(), "--format", formats});
+  RenderResult r = finish(run(a), module, what);
   std::vector<fs::path> files;
   for (const auto& e : fs::recursive_directory_iterator(tmp, ec))
     if (e.is_regular_file()) files.push_back(fs::relative(e.path(), tmp));

@@ -39,6 +39,13 @@ struct RenderResult {
 // OUT.lcm, DIR/validation.json}, DIR, force) (docs/report.md).
 RenderResult render_plots(const RenderInputs& in, const std::string& out_dir, bool force);
 
+// The mechanism of render_plots for any manipplot module (diagnose_model:
+// manipplot.diagnosis): `python -m <module> ARGS... -o <tmp> --format
+// <formats>` into a fresh temporary directory next to out_dir, its files
+// moved into out_dir as above; the same errors (exit 6, "--plots out_dir").
+RenderResult render_module_into(const std::string& module, const std::vector<std::string>& args, const std::string& formats,
+                                const std::string& out_dir, bool force);
+
 // `python -m manipplot.report ... -o FILE.html` through AtomicOutput.
 RenderResult render_report(const std::vector<std::string>& results_json, const RenderInputs& extra,
                            const std::string& html_path, bool force);
