@@ -364,6 +364,8 @@ TEST_CASE("manipulandum: hidden curl 40 N/m is named, c within 20 %", "[.known-m
 TEST_CASE("manipulandum: detection study", "[.mstudy]") {
   const char* se = std::getenv("MANIP_MSTUDY_SEEDS");
   const int seeds = se ? std::atoi(se) : 20;
+  const char* fs = std::getenv("MANIP_MSTUDY_FIRST");  // first hidden seed (default 5000)
+  const std::uint64_t first_seed = fs ? std::strtoull(fs, nullptr, 10) : 5000;
   std::vector<std::string> cells = {"none",         "delay:0.001",  "delay:0.002", "delay:0.004", "friction:0.5",
                                     "friction:1",   "friction:2",   "handle:0.15", "handle:0.3",  "handle:0.6",
                                     "reflex:0.25",  "reflex:0.5",   "reflex:1",    "curl:20",     "curl:40",
@@ -389,7 +391,7 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
     for (int s = 0; s < seeds; ++s) {
       Case c;
       c.effects = eff;
-      c.hidden_seed = 5000 + static_cast<std::uint64_t>(s);
+      c.hidden_seed = first_seed + static_cast<std::uint64_t>(s);
       const auto o = run_case(c);
       const bool reflex = !eff.empty() && eff.front().mechanism == sim::HiddenMechanism::reflex;
       Matrix2d kt = reflex ? o.k_intr : o.k_app, dt = reflex ? o.d_intr : o.d_app;
@@ -402,6 +404,19 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
       if (frob(o.pem.k, kt) < 0.10) ++k0;
       if (frob(o.pem.d, dt) < 0.20) ++d0;
       const auto& named = o.concl.named;
+      if (std::getenv("MANIP_MSTUDY_VERBOSE")) {
+        std::fprintf(stderr, "%s seed %llu: named", cell.c_str(), static_cast<unsigned long long>(c.hidden_seed));
+        for (const auto& n : named) std::fprintf(stderr, " %s", n.c_str());
+        std::fprintf(stderr, " (equation error:");
+        for (const auto& n : o.dg.accepted) std::fprintf(stderr, " %s", n.c_str());
+        std::fprintf(stderr, ")");
+        for (const auto& r : o.lk.rounds)
+          for (const auto& lc : r.candidates)
+            if (lc.significant) std::fprintf(stderr, "; %s LR %.1f p_holm %.2g relevance %.2f", lc.id.c_str(), lc.lr, lc.p_holm, lc.relevance);
+        for (const auto& lc : o.lk.accepted_fits)
+          if (lc.heldout_done) std::fprintf(stderr, "; held-out %s %+.3f +- %.3f", lc.id.c_str(), lc.heldout.mean, lc.heldout.se);
+        std::fprintf(stderr, "\n");
+      }
       if (eff.empty()) {
         if (!named.empty()) ++falsen;
         continue;
