@@ -9,9 +9,9 @@
 // b/K away from where it would be). Measured (docs/diagnosis.md,
 // "Force-sensor mechanisms"): a realistic offset or drift does not bias the
 // default estimate beyond the seed-to-seed spread, a large one does, and in
-// the simulator an offset of 1 N already breaks the high-pass isolation (the
-// simulated hand starts every trial in the target and is pushed off it, a
-// transient the 1 Hz high-pass spreads into the window): no column here.
+// the simulator an offset of 1 N already breaks the high-pass isolation (it
+// is a step at each trial start, on which the simulated person's unperturbed
+// hand rings at ~1.25 Hz, passed by the 1 Hz high-pass): no column here.
 #include <cmath>
 
 #include "manip/diagnosis/manipulandum.hpp"

@@ -91,7 +91,7 @@ TEST_CASE("planar sensor: force_sensor_lag is in the library, bounds 0-10 ms") {
   CHECK(m->shape_params().empty());
 }
 
-TEST_CASE("planar sensor: the lag's column d/dt(u − Δu_ext(21) − M_handle Δẍ) − u̇ against hand-computed values") {
+TEST_CASE("planar sensor: the lag column d/dt(u - du_ext_21 - M_handle ddx) - du/dt against hand-computed values") {
   // One trial of 400 samples at 1 kHz; u_pert a ramp r t on axis 0 and 0 on
   // axis 1. Far from the window's ends (more than the SG half-window) the
   // smoothed rate of a ramp is r exactly (the SG filter keeps cubics), so the

@@ -45,7 +45,7 @@ Run run(const std::vector<HiddenEffect>& effects, std::uint64_t hidden_seed = 2)
 
 }  // namespace
 
-TEST_CASE("hidden sensor: parse sensor_lag, sensor_offset, sensor_drift; refuse bad text naming it") {
+TEST_CASE("hidden sensor: parse sensor_lag, sensor_offset, sensor_drift and refuse bad text naming it") {
   CHECK(parse_hidden_effect("sensor_lag:0.001").mechanism == HiddenMechanism::sensor_lag);
   CHECK(parse_hidden_effect("sensor_offset:2").mechanism == HiddenMechanism::sensor_offset);
   const auto e = parse_hidden_effect("sensor_drift:0.05");
@@ -70,7 +70,7 @@ TEST_CASE("hidden sensor: parse sensor_lag, sensor_offset, sensor_drift; refuse 
   CHECK(hs.design.hidden_sensor_drift_nps == 0.1);
 }
 
-TEST_CASE("hidden sensor: the admittance renders from the reading the log records (M_adm ẍ + D_adm ẋ = f_r + u_pert)") {
+TEST_CASE("hidden sensor: the admittance renders from the reading the log records (M_adm xdd + D_adm xd = f_r + u_pert)") {
   for (const char* h : {"sensor_lag:0.002", "sensor_offset:3", "sensor_drift:0.1"}) {
     INFO(h);
     const auto r = run({parse_hidden_effect(h)});
@@ -89,7 +89,7 @@ TEST_CASE("hidden sensor: the admittance renders from the reading the log record
   CHECK(r.states.front().f_sensor_workspace_n[1] == Approx(3.0).margin(1e-12));
 }
 
-TEST_CASE("hidden sensor: the apparent truth stays the person's; a bias of the reading pushes the handle") {
+TEST_CASE("hidden sensor: the apparent truth stays the person's with a lag, a bias of the reading pushes the handle") {
   static const auto clean = run({});
   REQUIRE(clean.sum.apparent);
   const auto& k0 = clean.sum.apparent->k_npm;
