@@ -67,7 +67,8 @@ static int run(int argc, char** argv) {
   cli::add_force(app, c.force)->description("replace existing output files (--out and --key)");
   app.add_option("--hidden", hidden,
                  "MECHANISM:MAGNITUDE, SI units, repeatable: delay:0.002 (s) | friction:1 (N) | handle:0.3 (kg) | "
-                 "reflex:0.5 (x intrinsic K, D; 25-35 ms) | curl:40 (N/m). None: a clean session");
+                 "reflex:0.5 (x intrinsic K, D; 25-35 ms) | curl:40 (N/m) | sensor_lag:0.001 (s, first-order low pass of the "
+                 "force sensor) | sensor_offset:2 (N) | sensor_drift:0.05 (N/s). None: a clean session");
   app.add_option("--hidden-seed", hidden_seed, "draw of the session seed, impedance scale and reflex delay (default 1)");
   app.add_option("--noise", noise, cli::join(kNoise) + " (default realistic)")->check(cli::one_of(kNoise));
   cli::add_movements(app, c.movements, 1, 100000, "number of movements");

@@ -726,6 +726,7 @@ std::vector<std::unique_ptr<Mechanism>> planar_library(bool with_time_varying) {
   v.push_back(std::make_unique<StageFriction>());
   v.push_back(std::make_unique<HandleMass>());
   v.push_back(std::make_unique<WrongMbsp>());
+  v.push_back(make_force_sensor_lag());
   // TimeVaryingStiffness is not in the default library: in a 150 ms window its
   // columns (t-weighted Δx) are confounded with Δẍ (handle mass, M_BSP) and
   // the delayed reflex; on hidden handle-mass sessions it was accepted in

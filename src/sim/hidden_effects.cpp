@@ -19,7 +19,10 @@ constexpr Named kNames[] = {{"delay", HiddenMechanism::actuation_delay, 0.05},
                             {"friction", HiddenMechanism::stage_friction, 20.0},
                             {"handle", HiddenMechanism::handle_mass, 5.0},
                             {"reflex", HiddenMechanism::reflex, 3.0},
-                            {"curl", HiddenMechanism::curl, 500.0}};
+                            {"curl", HiddenMechanism::curl, 500.0},
+                            {"sensor_lag", HiddenMechanism::sensor_lag, 0.02},
+                            {"sensor_offset", HiddenMechanism::sensor_offset, 50.0},
+                            {"sensor_drift", HiddenMechanism::sensor_drift, 1.0}};
 }  // namespace
 
 std::string to_string(HiddenMechanism m) {
@@ -34,7 +37,8 @@ HiddenEffect parse_hidden_effect(const std::string& text) {
   const auto colon = text.find(':');
   const std::string what = "--hidden '" + text + "'";
   if (colon == std::string::npos)
-    throw UsageError(what + ": expected MECHANISM:MAGNITUDE (delay:0.002, friction:1, handle:0.3, reflex:0.5, curl:40)");
+    throw UsageError(what + ": expected MECHANISM:MAGNITUDE (delay:0.002, friction:1, handle:0.3, reflex:0.5, curl:40, "
+                     "sensor_lag:0.001, sensor_offset:2, sensor_drift:0.05)");
   const std::string name = text.substr(0, colon), value = text.substr(colon + 1);
   for (const auto& n : kNames) {
     if (name != n.name) continue;
@@ -51,7 +55,8 @@ HiddenEffect parse_hidden_effect(const std::string& text) {
       throw UsageError(what + ": magnitude must be in [0, " + std::to_string(n.max) + "] (SI units)");
     return HiddenEffect{n.m, v};
   }
-  throw UsageError(what + ": unknown mechanism '" + name + "' (delay, friction, handle, reflex, curl)");
+  throw UsageError(what + ": unknown mechanism '" + name +
+                   "' (delay, friction, handle, reflex, curl, sensor_lag, sensor_offset, sensor_drift)");
 }
 
 HiddenEffectHuman::HiddenEffectHuman(const LinearHumanParams& person, std::vector<HiddenEffect> effects,
@@ -71,6 +76,9 @@ HiddenEffectHuman::HiddenEffectHuman(const LinearHumanParams& person, std::vecto
         reflex_d_nspm_ += e.magnitude * person.d_nspm;
         break;
       case HiddenMechanism::actuation_delay: break;  // in the plant (SessionDesign::actuation_delay_cycles)
+      case HiddenMechanism::sensor_lag:              // in the force sensor (SessionDesign::hidden_sensor_*)
+      case HiddenMechanism::sensor_offset:
+      case HiddenMechanism::sensor_drift: break;
     }
   }
   const auto n = static_cast<std::size_t>(std::max(1L, std::lround(draw.reflex_delay_s / plant_step_s)));
@@ -126,6 +134,9 @@ HiddenSession make_hidden_session(const SessionDesign& base, const LinearHumanPa
       hs.draw.actuation_delay_cycles += static_cast<int>(std::lround(e.magnitude * fs));
     if (e.mechanism == HiddenMechanism::handle_mass) hs.design.hidden_handle_extra_kg += e.magnitude;
     if (e.mechanism == HiddenMechanism::stage_friction) hs.design.hidden_stage_friction_n += e.magnitude;
+    if (e.mechanism == HiddenMechanism::sensor_lag) hs.design.hidden_sensor_lag_s += e.magnitude;
+    if (e.mechanism == HiddenMechanism::sensor_offset) hs.design.hidden_sensor_offset_n += e.magnitude;
+    if (e.mechanism == HiddenMechanism::sensor_drift) hs.design.hidden_sensor_drift_nps += e.magnitude;
   }
   hs.design.seed = hs.draw.session_seed;
   hs.design.actuation_delay_cycles = hs.draw.actuation_delay_cycles;

@@ -56,6 +56,9 @@ void check_design(const SessionDesign& d) {
   if (d.actuation_delay_cycles < 0) throw std::invalid_argument("session design: negative actuation delay");
   if (!(d.hidden_handle_extra_kg >= 0.0) || !(d.hidden_stage_friction_n >= 0.0))
     throw std::invalid_argument("session design: hidden handle mass and stage friction must be >= 0");
+  if (!(d.hidden_sensor_lag_s >= 0.0) || !std::isfinite(d.hidden_sensor_lag_s) || !std::isfinite(d.hidden_sensor_offset_n) ||
+      !std::isfinite(d.hidden_sensor_drift_nps))
+    throw std::invalid_argument("session design: hidden force-sensor lag must be >= 0, offset and drift finite");
   if (d.n_movements < 0) throw std::invalid_argument("session design: negative number of movements");
   const int n_pert = static_cast<int>(d.angles_deg.size()) * d.reps_per_angle;
   if (n_pert > d.n_movements)
@@ -98,6 +101,14 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
     return d.session.frame.vector_to_shoulder(Vec2(-d.hidden_stage_friction_n * std::tanh(v.x() / kSmoothingMps),
                                                    -d.hidden_stage_friction_n * std::tanh(v.y() / kSmoothingMps)));
   };
+  // Hidden force-sensor bias (offset + drift over the session), shoulder frame,
+  // at time t_s of the session (the same in a trial and its twin).
+  const auto sensor_bias = [&](double t_s) -> Vec2 {
+    const double b = d.hidden_sensor_offset_n + d.hidden_sensor_drift_nps * t_s;
+    return b == 0.0 ? Vec2::Zero() : Vec2(d.session.frame.vector_to_shoulder(Vec2(b, b)));
+  };
+  const bool sensor_lag = d.hidden_sensor_lag_s > 0.0;
+  const double lag_alpha = sensor_lag ? 1.0 - std::exp(-h / d.hidden_sensor_lag_s) : 1.0;
   const PerturbationProfile profile = d.perturbation();
   const auto& frame = d.session.frame;
   auto* truth_src = dynamic_cast<TruthSource*>(&human);
@@ -133,6 +144,7 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
     trigger.forget_previous();
     Vec2 xdd = Vec2::Zero();
     Vec2 f_sensor = Vec2::Zero();
+    Vec2 f_lag = Vec2::Zero();  // the lagged sensor's filter state (hidden sensor_lag), shoulder frame
     Vec2 prev_meas_ws = frame.point_to_workspace(human.hand_position_m());
     prev_meas_ws = Vec2(quant(prev_meas_ws.x()), quant(prev_meas_ws.y()));
     for (std::int64_t k = 0; k < n_cycles; ++k) {
@@ -192,15 +204,47 @@ SessionRunSummary run_session(const SessionDesign& d, HumanModel& human, logging
       // actuation_delay_cycles earlier; the log keeps the commanded force).
       const Vec2 u_applied =
           d.actuation_delay_cycles > 0 ? trigger.force_shoulder_n(c - d.actuation_delay_cycles) : u_pert;
+      // The force sensor (hidden sensor_lag/offset/drift): the admittance renders
+      // from the reading f_r = LP_tau(f) + bias, the log records f_r; f is the
+      // force the sensor bears (hand on handle minus the handle's inertia).
+      // Without lag the reading is algebraic and the bias acts like a force on
+      // the admittance: step_ideal_admittance with u + bias, f = its f_sensor.
+      // With lag the admittance's acceleration follows the reading alone
+      // (M_adm ẍ + D_adm ẋ = f_r + u), f = h − (M_x + M_handle) ẍ, and the
+      // filter state steps exactly, f_lag += (1 − e^(−h/tau)) (f − f_lag).
+      // f_extra0 gets f_r − f so that eq. 21 on the exact signals gives the
+      // person's true Δu_ext (the apparent truth stays the person's).
       Vec2 f_extra0 = u_applied;
       for (int j = 0; j < d.substeps; ++j) {
         const Vec2 f_fric = stage_friction(human.hand_velocity_mps());
-        if (j == 0) f_extra0 = u_applied + f_fric;
-        const auto ps = step_ideal_admittance(human, plant_true, u_applied + f_fric, h, d.midpoint_plant);
-        if (j == 0) {
-          xdd = ps.xdd_mps2;
-          f_sensor = ps.f_sensor_n;
+        const Vec2 bias = sensor_bias((static_cast<double>(c) + static_cast<double>(j) / d.substeps) * dt);
+        if (!sensor_lag) {
+          const auto ps = step_ideal_admittance(human, plant_true, u_applied + f_fric + bias, h, d.midpoint_plant);
+          if (j == 0) {
+            f_extra0 = u_applied + f_fric + bias;
+            xdd = ps.xdd_mps2;
+            f_sensor = ps.f_sensor_n + bias;
+          }
+          continue;
         }
+        Mat2 m_x;
+        Vec2 hh;
+        if (d.midpoint_plant)
+          human.endpoint_dynamics_for_step(h, m_x, hh);
+        else
+          human.endpoint_dynamics(m_x, hh);
+        Mat2 m_adm = plant_true.m_adm_kg;
+        if (d.midpoint_plant) m_adm += (0.5 * h) * plant_true.d_adm_nspm;
+        const Vec2 f_read = f_lag + bias;
+        const Vec2 a = m_adm.ldlt().solve(Vec2(f_read + u_applied + f_fric - plant_true.d_adm_nspm * human.hand_velocity_mps()));
+        const Vec2 f_true = hh - (m_x + plant_true.m_handle_kg) * a;
+        if (j == 0) {
+          f_extra0 = u_applied + f_fric + (f_read - f_true);
+          xdd = a;
+          f_sensor = f_read;
+        }
+        human.advance(h, a);
+        f_lag += lag_alpha * (f_true - f_lag);
       }
       copy2(s.xdd_ref_workspace_mps2, frame.vector_to_workspace(xdd));
       Vec2 fs_noisy = f_sensor;

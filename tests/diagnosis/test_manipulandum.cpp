@@ -134,6 +134,10 @@ MainParam main_param_of(const sim::HiddenEffect& e, const sim::HiddenDraw& draw,
     case sim::HiddenMechanism::handle_mass: return {"handle_mass", "handle_extra", e.magnitude};
     case sim::HiddenMechanism::reflex: return {"short_latency_reflex", "delay", draw.reflex_delay_s};
     case sim::HiddenMechanism::curl: return {"curl_stiffness", "curl_c", e.magnitude};
+    case sim::HiddenMechanism::sensor_lag: return {"force_sensor_lag", "sensor_lag", e.magnitude};
+    // Offset and drift have no mechanism (removed by the isolation; docs/diagnosis.md).
+    case sim::HiddenMechanism::sensor_offset:
+    case sim::HiddenMechanism::sensor_drift: return {"(none)", "", e.magnitude};
   }
   return {};
 }

@@ -214,4 +214,10 @@ struct PlanarReport {
 // longer the last edge grows).
 [[nodiscard]] std::vector<double> default_window_edges(double t_est_s);
 
+// Force-sensor lag (src/diagnosis/planar_sensor.cpp; docs/diagnosis.md,
+// "Force-sensor mechanisms"): column d/dt (u_pert − Δu_ext(21) − M_handle Δẍ) − u̇_pert
+// = d/dt Δf_r (the reading's variation), gain tau [s]. The dataset does not
+// carry M_handle: the library's instance takes the schema's 0.25 kg.
+[[nodiscard]] std::unique_ptr<Mechanism> make_force_sensor_lag(double m_handle_kg = 0.25);
+
 }  // namespace manip::diagnosis

@@ -19,6 +19,14 @@
 //                   [25, 35] ms by the hidden seed).
 //   curl:MAG_Npm    antisymmetric (curl) stiffness [0 MAG; -MAG 0] on the
 //                   deviation from the plan (heteronymous reflexes, paper §3.3).
+//   sensor_lag:MAG_s     the handle force sensor's reading is its force through a
+//                   first-order low pass with time constant MAG (a filtered F/T
+//                   sensor: 0.5-3 ms); the admittance renders from the reading
+//                   and the log records it (SessionDesign::hidden_sensor_lag_s).
+//   sensor_offset:MAG_N  constant MAG N added to the reading on both workspace axes.
+//   sensor_drift:MAG_N_per_s  the reading drifts by MAG N/s times the session
+//                   time (cycle / sample rate) on both workspace axes (thermal
+//                   drift of strain gauges: 0.01-0.1 N/s).
 // The hidden seed also scales the person's D and K by one factor in
 // [0.85, 1.15] and sets the session seed, so sessions differ in more than noise.
 #include <array>
@@ -33,14 +41,24 @@
 
 namespace manip::sim {
 
-enum class HiddenMechanism { actuation_delay, stage_friction, handle_mass, reflex, curl };
+enum class HiddenMechanism {
+  actuation_delay,
+  stage_friction,
+  handle_mass,
+  reflex,
+  curl,
+  sensor_lag,
+  sensor_offset,
+  sensor_drift
+};
 
 struct HiddenEffect {
   HiddenMechanism mechanism{HiddenMechanism::curl};
-  double magnitude{0.0};  // SI: s, N, kg, fraction of K, N/m
+  double magnitude{0.0};  // SI: s, N, kg, fraction of K, N/m (sensor: s, N, N/s)
 };
 
-// "delay:0.002", "friction:1", "handle:0.3", "reflex:0.5", "curl:40".
+// "delay:0.002", "friction:1", "handle:0.3", "reflex:0.5", "curl:40",
+// "sensor_lag:0.001", "sensor_offset:2", "sensor_drift:0.05".
 // Throws manip::UsageError naming the text and what is wrong.
 HiddenEffect parse_hidden_effect(const std::string& text);
 [[nodiscard]] std::string to_string(HiddenMechanism m);
@@ -55,7 +73,7 @@ struct HiddenDraw {
 };
 
 // A person with the hidden person-side effects (reflex, curl) added to the
-// force it produces. The apparatus effects (delay, friction, handle mass) are
+// force it produces. The apparatus effects (delay, friction, handle mass, force sensor) are
 // in the plant (SessionDesign hooks, set by make_hidden_session), so the
 // apparent truth (truth.hpp) stays the person's. Forwards the intrinsic truth
 // of the person (without the hidden effects). Never allocates after

@@ -53,6 +53,12 @@ struct SessionDesign {
   int actuation_delay_cycles{0};          // u_pert reaches the plant this many cycles after it is logged
   double hidden_handle_extra_kg{0.0};     // plant handle mass = configured + this, both axes
   double hidden_stage_friction_n{0.0};    // Coulomb per workspace axis: -F tanh(v_axis / 1 mm/s)
+  // Handle force sensor: reading = LP_tau(force) + offset + drift t (t = cycle / rate;
+  // offset and drift on both workspace axes). The admittance renders from the
+  // reading, the log records it (plus force_noise_n, log only as before).
+  double hidden_sensor_lag_s{0.0};        // first-order low pass time constant tau
+  double hidden_sensor_offset_n{0.0};
+  double hidden_sensor_drift_nps{0.0};
   bool write_apparent_truth{true};        // session-level MANIP_TRUTH_IMPEDANCE, model "apparent", trial -1 (sim/truth.hpp)
   Vec2 start_shoulder_m{0.0, 0.30};
   Vec2 goal_shoulder_m{0.0, 0.55};
