@@ -148,16 +148,14 @@ struct Limit {
   double truth = NAN, limit = NAN;
 };
 Limit limit_of(const Outcome& o, const sim::HiddenEffect& e) {
-  std::string id, gain;
+  const auto mp = main_param_of(e, o.draw, 4000.0);
+  const std::string id = mp.id;
+  std::string gain = mp.param;
   Limit l;
-  switch (e.mechanism) {
-    case sim::HiddenMechanism::actuation_delay:
-      id = "actuation_delay", gain = "delay", l.truth = static_cast<double>(o.draw.actuation_delay_cycles) / 4000.0;
-      break;
-    case sim::HiddenMechanism::stage_friction: id = "stage_friction", gain = "F_coulomb", l.truth = e.magnitude; break;
-    case sim::HiddenMechanism::handle_mass: id = "handle_mass", gain = "handle_extra", l.truth = e.magnitude; break;
-    case sim::HiddenMechanism::reflex: id = "short_latency_reflex", gain = "Kr11", l.truth = e.magnitude * o.k_intr(0, 0); break;
-    case sim::HiddenMechanism::curl: id = "curl_stiffness", gain = "curl_c", l.truth = e.magnitude; break;
+  l.truth = mp.truth;
+  if (e.mechanism == sim::HiddenMechanism::reflex) {  // its main parameter is a shape (the delay); the limit is on a gain
+    gain = "Kr11";
+    l.truth = e.magnitude * o.k_intr(0, 0);
   }
   if (o.dg.rounds.empty()) return l;
   for (const auto& c : o.dg.rounds.front().candidates) {
