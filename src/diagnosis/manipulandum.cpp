@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "manip/common/errors.hpp"
+#include "manip/dsp/savgol.hpp"
 #include "manip/estimation/methods/method.hpp"
 #include "manip/estimation/methods/registry.hpp"
 #include "manip/estimation/pem.hpp"
@@ -252,6 +253,7 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
           p.u_pert_rate[k] = (t.u_pert_n[hi] - t.u_pert_n[lo]) / (static_cast<double>(hi - lo) * d.dt_s);
           p.xd_stage[k] = t.xd_ref_m.at(i);
         }
+        p.friction_iso = isolated_stage_friction(ses.info, t, opt.estimator.pipeline, rot);
         if (opt.pem_baseline) {
           out.vw.push_back(std::move(vw));
           out.m_bsp.push_back(*m_bsp);
@@ -484,6 +486,24 @@ std::vector<std::vector<Vector2d>> extension_correction(const Dataset& d, const 
           out[i][k] += u[k] - ud;
         }
       }
+    } else if (mech->id() == "stage_friction") {
+      // The default method models the raw positions of [onset − t_pre, onset
+      // + T_est] (no SG, no high-pass), the unperturbed movement as its
+      // disturbance: the friction force it should be given is the unfiltered
+      // change since onset, F [tanh(v(t)/v_s) − tanh(v(t_onset)/v_s)] per
+      // workspace axis (the unperturbed run keeps its onset value unless it
+      // reverses in the window; that part stays in the disturbance).
+      const double F = alpha * f.theta(c), vs = dg.accepted_settings[a].at(0);
+      for (std::size_t i = 0; i < d.planar.size(); ++i) {
+        const auto& p = d.planar[i];
+        const Matrix2d sh_to_ws = p.ws_to_sh.transpose();
+        auto th = [&](const Vector2d& v_sh) {
+          const Vector2d v = sh_to_ws * v_sh;
+          return Vector2d(std::tanh(v(0) / vs), std::tanh(v(1) / vs));
+        };
+        const Vector2d t0 = th(p.xd_stage.front());
+        for (std::size_t k = 0; k < p.xd_stage.size() && k < out[i].size(); ++k) out[i][k] += F * (p.ws_to_sh * (th(p.xd_stage[k]) - t0));
+      }
     } else {
       const auto raw = mech->columns(d, dg.accepted_settings[a]);
       for (std::size_t s = 0; s < d.segments.size(); ++s) {
@@ -568,41 +588,125 @@ class ActuationDelay final : public Mechanism {
   }
 };
 
-// Uncompensated stage friction, Coulomb F per workspace axis with a smooth
-// law -F tanh(v / v_s): on the variational equation it enters as the
-// difference between the perturbed run (stage velocity v) and its
-// unperturbed counterpart (v − Δv):
-//   eq. 21 − true Δu_ext = F [tanh(v/v_s) − tanh((v − Δv)/v_s)]   (per workspace axis, rotated to the shoulder frame).
+}  // namespace
+
+// Uncompensated stage friction, Coulomb F per workspace axis with the smooth
+// law f_fr = −F tanh(v / v_s) (v the stage velocity on that axis): what goes
+// into the eq. 14 target, derived (sim: session_runner.cpp puts f_fr on the
+// stage beside u_pert, uncompensated).
+//
+// Where it enters. The admittance (eq. 19-20) renders the handle from the
+// force sensor; the stage also carries u_pert and f_fr. With u_ext the force
+// of the handle on the hand (the sign of eq. 21), over the WHOLE trial:
+//   u_ext = u_pert + f_fr − (M_adm + M_handle) ẍ − D_adm ẋ,
+// while eq. 21 computed from the log has no f_fr.
+// The isolation (estimation::isolate_variational, paper §3.1) is linear in
+// the position it is given: Δẍ = ∫_onset^t HP(SG₃ x), Δẋ, Δx its integrals
+// from onset. Write I[s] for that chain applied to a signal s as if it were
+// an acceleration (SG₃ of its double integral, high-pass, ∫ from onset):
+// Δẍ = I[ẍ]; and because the high-pass and d/dt commute, Δẋ = I[ẋ] and
+// Δx = I[x] up to polynomials in t − t_onset of order 1 and 2 (the
+// integration constants from onset): the baseline's own nuisance, projected
+// at order 1 as before (Projector); friction adds no polynomial of its own.
+// The person (eq. 14 on the full signals, a smooth plan term g with
+// I[g] ≈ 0, as the isolation already assumes): u_ext = M_BSP ẍ + D ẋ + K x + g.
+// Apply I to both relations and put them into the target of eq. 14:
+//   y = u_pert − (M_adm + M_handle + M_BSP) Δẍ − D_adm Δẋ
+//     = D Δẋ + K Δx + F · I[tanh(v/v_s)] + (u_pert − I[u_pert])   (mod polynomial)
+// (the last term is the baseline's own; f_fr enters with −I[f_fr] = +F I[tanh]).
+// So the column is I[tanh(v/v_s)] of the perturbed trial only: no unperturbed
+// run and no Δv. The friction of the unperturbed movement is in both sides
+// consistently — what the person felt of it is in the isolated Δx, Δẋ the
+// same way (I is exact on the full signals). The earlier column
+// F[tanh(v/v_s) − tanh((v − Δv)/v_s)] missed the SG smoothing (225 samples
+// at 4 kHz, 56 ms: a third of the window, exactly where the steps are) and
+// took the unperturbed run's sign changes from the noisy isolated Δv.
+// Per axis: tanh acts per workspace axis, I is the same linear filter on each
+// axis, so I commutes with the workspace→shoulder rotation R:
+// column = R I[tanh(Rᵀ v / v_s)], computed here as the Δẍ that
+// isolate_variational makes of the position R ∬ tanh(Rᵀ v / v_s) over the
+// trial's own span and onset (the same code, not a copy of it).
+// v: the logged admittance reference velocity (the stage follows the
+// reference). Measured: with the backward difference of the quantised
+// encoder position instead, friction 0.5 and 1 N were named in 0/20 sessions
+// each (18/20 and 20/20 with the reference): the difference is noise at
+// v_s = 1 mm/s. Without a reference velocity, the SG first derivative of the
+// position (not measured).
+std::vector<std::vector<Vector2d>> isolated_stage_friction(const estimation::SessionInfo& info, const estimation::TrialData& trial,
+                                                           const estimation::PipelineSettings& pipeline, const Matrix2d& ws_to_sh) {
+  const std::size_t n = trial.x_m.size();
+  const double dt = 1.0 / info.sample_rate_hz;
+  const Matrix2d sh_to_ws = ws_to_sh.transpose();
+  std::vector<Vector2d> v_ws(n, Vector2d::Zero());
+  if (trial.xd_ref_m.size() == n) {
+    for (std::size_t i = 0; i < n; ++i) v_ws[i] = sh_to_ws * trial.xd_ref_m[i];
+  } else if (n >= static_cast<std::size_t>(estimation::sg_window_for(pipeline, info.sample_rate_hz))) {
+    // No reference velocity: the pipeline's SG first derivative of the measured
+    // position (a plain difference of the quantised encoder is noise at v_s).
+    const dsp::SavgolFilter rate(estimation::sg_window_for(pipeline, info.sample_rate_hz), pipeline.sg_order, 1, dt);
+    std::vector<double> x(n), xd(n);
+    for (int a = 0; a < 2; ++a) {
+      for (std::size_t i = 0; i < n; ++i) x[i] = trial.x_m[i](a);
+      rate.apply(x, xd);
+      for (std::size_t i = 0; i < n; ++i) v_ws[i](a) = xd[i];
+    }
+    for (auto& v : v_ws) v = sh_to_ws * v;
+  }
+  estimation::TrialData g = trial;  // same span, onset and channels; only the position is replaced
+  std::vector<std::vector<Vector2d>> out;
+  out.reserve(kStageFrictionVs.size());
+  for (const double vs : kStageFrictionVs) {
+    Vector2d f_prev = Vector2d::Zero(), vel = Vector2d::Zero(), pos = Vector2d::Zero();
+    for (std::size_t i = 0; i < n; ++i) {
+      Vector2d f;
+      for (int j = 0; j < 2; ++j) f(j) = std::tanh(v_ws[i](j) / vs);
+      f = ws_to_sh * f;
+      if (i > 0) {  // trapezoid, twice (SG₃ is exact on the integration constants)
+        const Vector2d vel_next = vel + 0.5 * dt * (f_prev + f);
+        pos += 0.5 * dt * (vel + vel_next);
+        vel = vel_next;
+      }
+      f_prev = f;
+      g.x_m[i] = pos;
+    }
+    out.push_back(estimation::isolate_variational(info, g, pipeline).dxdd);
+  }
+  return out;
+}
+
+namespace {
+
 class StageFriction final : public Mechanism {
  public:
   std::string id() const override { return "stage_friction"; }
   std::string title() const override { return "stage friction not compensated: Coulomb F tanh(v / v_s) per workspace axis"; }
   std::string signature() const override {
-    return "residual steps where the stage velocity (perturbed or unperturbed) changes sign: mostly on the lateral axis of a reach";
+    return "residual follows the isolated tanh(v / v_s) of the stage velocity: smoothed steps where it changes sign, "
+           "mostly on the lateral axis of a reach";
   }
   std::string not_applicable(const Dataset& d) const override { return planar_only(d); }
-  std::vector<ParamInfo> shape_params() const override { return {{"v_s", "m/s", kVs.front(), kVs.back()}}; }
+  std::vector<ParamInfo> shape_params() const override { return {{"v_s", "m/s", kStageFrictionVs.front(), kStageFrictionVs.back()}}; }
   // Linear-guide stages: 0.5-5 N breakaway; 10 N bounds a badly adjusted rig.
   std::vector<ParamInfo> gains() const override { return {{"F_coulomb", "N", 0.0, 10.0}}; }
   int main_param() const override { return 1; }
   std::vector<std::vector<double>> grid(const Dataset&) const override {
     std::vector<std::vector<double>> g;
-    for (double v : kVs) g.push_back({v});
+    for (double v : kStageFrictionVs) g.push_back({v});
     return g;
   }
+  // The isolated series prepared per trial (PlanarTrial::friction_iso), one per v_s of the grid.
   Columns columns(const Dataset& d, std::span<const double> s) const override {
-    const double vs = s[0];
-    return planar_columns(d, 1, [vs](const PlanarTrial& p, int a, std::size_t k, auto& c, std::size_t i) {
-      const Matrix2d sh_to_ws = p.ws_to_sh.transpose();
-      const Vector2d v = sh_to_ws * p.xd_stage[k];
-      const Vector2d dv = sh_to_ws * p.dxd[k];
-      Vector2d f;
-      for (int j = 0; j < 2; ++j) f(j) = std::tanh(v(j) / vs) - std::tanh((v(j) - dv(j)) / vs);
-      c[0][i] = (p.ws_to_sh * f)(a);
+    std::size_t iv = kStageFrictionVs.size();
+    for (std::size_t i = 0; i < kStageFrictionVs.size(); ++i)
+      if (std::fabs(kStageFrictionVs[i] - s[0]) <= 1e-9 * kStageFrictionVs[i]) iv = i;
+    if (iv == kStageFrictionVs.size()) throw std::invalid_argument("stage_friction: v_s " + num(s[0]) + " is not on the grid");
+    for (const auto& p : d.planar)
+      if (p.friction_iso.size() != kStageFrictionVs.size() || p.friction_iso[iv].size() != p.dx.size())
+        throw std::invalid_argument("stage_friction: trial " + std::to_string(p.trial) + " has no isolated friction series");
+    return planar_columns(d, 1, [iv](const PlanarTrial& p, int a, std::size_t k, auto& c, std::size_t i) {
+      c[0][i] = p.friction_iso[iv][k](a);
     });
   }
-  // Smoothing velocity of the Coulomb law: 0.25-16 mm/s (log-spaced).
-  static constexpr std::array<double, 7> kVs = {0.00025, 0.0005, 0.001, 0.002, 0.004, 0.008, 0.016};
 };
 
 // Handle mass different from the configured one (eq. 19-21 use the session's

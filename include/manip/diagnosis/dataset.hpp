@@ -34,6 +34,10 @@ struct PlanarTrial {
   std::vector<Eigen::Vector2d> du_ext_force;           // from the force sensor
   std::vector<Eigen::Vector2d> u_pert, u_pert_rate;    // logged perturbation force and its rate (N, N/s)
   std::vector<Eigen::Vector2d> xd_stage;               // absolute stage velocity (admittance reference), shoulder frame
+  // Stage friction as the isolation leaves it: I[tanh(v_ws / v_s)] per
+  // workspace axis, rotated to the shoulder frame, one series per v_s of the
+  // stage_friction grid (isolated_stage_friction in manipulandum.hpp).
+  std::vector<std::vector<Eigen::Vector2d>> friction_iso;
 };
 
 struct Segment {

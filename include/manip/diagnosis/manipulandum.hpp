@@ -15,6 +15,7 @@
 //
 // Truth channels (MANIP_TRUTH_STATE, MANIP_TRUTH_IMPEDANCE) are never read:
 // LogCollector drops them before the assembler sees the stream.
+#include <array>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -65,6 +66,21 @@ class LogCollector final : public logging::SessionHandler {
 
 // Reads a log through a LogCollector. Throws manip::InputError (exit 4).
 [[nodiscard]] CollectedSession collect_log(const std::string& path);
+
+// The v_s grid of the stage_friction mechanism (m/s): 0.25-16 mm/s, log-spaced.
+inline constexpr std::array<double, 7> kStageFrictionVs = {0.00025, 0.0005, 0.001, 0.002, 0.004, 0.008, 0.016};
+
+// Stage friction through the isolation (the stage_friction column before the
+// nuisance projection): for each v_s of kStageFrictionVs, the series
+// tanh(v_ws / v_s) per workspace axis (v the trial's admittance reference
+// velocity, the whole trial), rotated to the shoulder frame by `ws_to_sh`,
+// isolated exactly as the trial's acceleration is (estimation::isolate_variational:
+// SG jerk of its double integral, high-pass, integration from onset), over
+// [onset, onset + T_est]. Derivation in manipulandum.cpp (StageFriction).
+[[nodiscard]] std::vector<std::vector<Eigen::Vector2d>> isolated_stage_friction(const estimation::SessionInfo& info,
+                                                                               const estimation::TrialData& trial,
+                                                                               const estimation::PipelineSettings& pipeline,
+                                                                               const Eigen::Matrix2d& ws_to_sh);
 
 struct PlanarOptions {
   estimation::EstimatorSettings estimator{};  // pipeline (SG, high-pass, T_est) and pem settings as estimate_impedance's defaults
