@@ -147,19 +147,9 @@ int run(int argc, char** argv) {
     po.estimator.pipeline.t_est_s = t_est;
     po.pem_baseline = !no_pem;
     po.nuisance_order = poly_order;
-    if (eo.progress) eo.progress("isolating the variational signals (eq. 21)" + std::string(no_pem ? "" : " and fitting the default method"));
-    auto prep = diagnosis::prepare_planar(sessions, po, eo.folds);
-    const auto lib = diagnosis::planar_library(po.nuisance_order, time_varying);
-    eo.require_plausible = true;
-    eo.rank_by_t = true;
-    eo.prefer_simpler = true;
-    const auto res = diagnosis::diagnose(prep.data, lib, eo);
-    if (res.misfit_found() && po.pem_baseline) {
-      if (eo.progress) eo.progress("refitting the default method with the extension");
-      const auto corr = diagnosis::extension_correction(prep.data, res, lib);
-      prep.pem_extended = diagnosis::fit_default_method(prep, &corr);
-      prep.refined = diagnosis::refine_with_default_method(prep, res, lib, eo.progress);
-    }
+    const auto run = diagnosis::run_planar(sessions, po, eo, time_varying);
+    const auto& prep = run.prep;
+    const auto& res = run.dg;
     diagnosis::ReportContext ctx;
     ctx.front_end = "manipulandum session, variational signals of eq. 21";
     char buf[400];
@@ -171,18 +161,14 @@ int run(int argc, char** argv) {
     ctx.baseline_equation = "Δu_ext - M_BSP Δẍ = D Δẋ + K Δx (eq. 14 with eq. 21's Δu_ext; D full, K symmetric, M_BSP eq. 16 fixed)";
     ctx.cv_units = "trials (both axes of a trial in the same fold; bootstrap resamples trials)";
     ctx.target_word = "target";
-    diagnosis::LikelihoodStage lk;
-    if (po.pem_baseline) lk = diagnosis::likelihood_stage(prep, res, lib, eo.alpha, eo.folds, eo.progress);
-    else lk.error = "--no-default-method";
-    const auto concl = diagnosis::conclude(res, lk, prep);
-    const auto pr = diagnosis::planar_report(prep, res, lib);
-    ctx.extra_text = pr.text + diagnosis::likelihood_text(lk) + diagnosis::conclusion_text(concl, res);
+    const auto pr = diagnosis::planar_report(prep, res, run.lib);
+    ctx.extra_text = pr.text + diagnosis::likelihood_text(run.lk) + diagnosis::conclusion_text(run.concl, res);
     std::cout << diagnosis::text_report(res, ctx);
     if (want_json) {
       auto j = diagnosis::json_report(res, ctx);
       j["manipulandum"] = pr.json;
-      j["likelihood"] = diagnosis::likelihood_json(lk);
-      j["conclusion"] = diagnosis::conclusion_json(concl);
+      j["likelihood"] = diagnosis::likelihood_json(run.lk);
+      j["conclusion"] = diagnosis::conclusion_json(run.concl);
       j["traces"] = diagnosis::traces_json(prep.data, res);
       if (json_file) write_json(j);
       if (!plots_dir.empty()) draw_plots(j, plots_dir, c.force);

@@ -19,6 +19,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "manip/diagnosis/likelihood_stage.hpp"
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/logging/session_stream.hpp"
 #include "manip/sim/hidden_effects.hpp"
@@ -74,20 +75,12 @@ int main(int argc, char** argv) {
     ses.push_back(diagnosis::collect_log(log));
     diagnosis::PlanarOptions po;
     diagnosis::EngineOptions eo;
-    eo.require_plausible = true;
-    eo.rank_by_t = true;
-    auto prep = diagnosis::prepare_planar(ses, po, eo.folds);
-    const auto lib = diagnosis::planar_library(po.nuisance_order);
-    const auto dg = diagnosis::diagnose(prep.data, lib, eo);
-    if (dg.misfit_found()) {
-      const auto corr = diagnosis::extension_correction(prep.data, dg, lib);
-      prep.pem_extended = diagnosis::fit_default_method(prep, &corr);
-      prep.refined = diagnosis::refine_with_default_method(prep, dg, lib);
-    }
-    const auto rep = diagnosis::planar_report(prep, dg, lib);
+    const auto run = diagnosis::run_planar(ses, po, eo);
+    const auto rep = diagnosis::planar_report(run.prep, run.dg, run.lib);
+    const auto& dg = run.dg;
     wall.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     cpu.push_back(cpu_s() - c0);
-    named = dg.accepted.empty() ? "none" : dg.accepted.front();
+    named = run.concl.named.empty() ? "none" : run.concl.named.front();
     std::printf("rep %d: %.3f s wall, %.3f s CPU (engine %.3f s), named: %s\n", r + 1, wall.back(), cpu.back(), dg.seconds, named.c_str());
   }
   std::printf("RESULT diagnosis median_s=%.3f min_s=%.3f max_s=%.3f cpu_median_s=%.3f reps=%d\n", median(wall),

@@ -200,6 +200,22 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       lc.lr = std::isfinite(lc.nll) ? std::max(0.0, 2.0 * (lc.nll0 - lc.nll)) : 0.0;
       lc.p = stats::chi2_sf(lc.lr, static_cast<double>(lc.df));
       lc.fit = pr.fit;
+      {
+        // Relevance against the current estimate's own 95 % intervals.
+        Eigen::Matrix2d dk = pr.fit.k - cur.k;
+        if (lc.id == "curl_stiffness") {
+          const double cc = lc.alpha * (c.gains_ee.empty() ? 0.0 : c.gains_ee.front());
+          dk(0, 1) += cc;
+          dk(1, 0) -= cc;
+        }
+        const Eigen::Matrix2d dd = pr.fit.d - cur.d;
+        const Eigen::Matrix2d hk = 0.5 * (cur.k_hi - cur.k_lo), hd = 0.5 * (cur.d_hi - cur.d_lo);
+        for (int r = 0; r < 2; ++r)
+          for (int q = 0; q < 2; ++q) {
+            if (hk(r, q) > 0) lc.relevance = std::max(lc.relevance, std::fabs(dk(r, q)) / hk(r, q));
+            if (hd(r, q) > 0) lc.relevance = std::max(lc.relevance, std::fabs(dd(r, q)) / hd(r, q));
+          }
+      }
       for (std::size_t s = 0; s < sp.size(); ++s) {
         const double v = c.setting[s];
         lc.params.push_back({sp[s].name, sp[s].unit, {v, v, v}, sp[s].plausible_lo, sp[s].plausible_hi, true, true});
@@ -228,7 +244,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       auto& c = rd.candidates[j];
       c.p_holm = adj[j];
       c.significant = adj[j] < alpha;
-      if (c.significant && c.plausible && (win < 0 || c.p < rd.candidates[static_cast<std::size_t>(win)].p ||
+      if (c.significant && c.plausible && c.relevance >= 1.0 && (win < 0 || c.p < rd.candidates[static_cast<std::size_t>(win)].p ||
                                            (c.p == rd.candidates[static_cast<std::size_t>(win)].p && c.lr > rd.candidates[static_cast<std::size_t>(win)].lr)))
         win = static_cast<int>(j);
     }
@@ -274,7 +290,9 @@ std::string likelihood_text(const LikelihoodStage& s) {
       if (static_cast<int>(i) == s.rounds[r].accepted)
         o << "  <- ACCEPTED";
       else if (c.significant)
-        o << (c.plausible ? "  significant" : "  significant, IMPLAUSIBLE (" + c.implausible_reason + ")");
+        o << (!c.plausible ? "  significant, IMPLAUSIBLE (" + c.implausible_reason + ")"
+                           : (c.relevance < 1.0 ? "  significant, NEGLIGIBLE (moves D, K by " + g4(c.relevance) + " of their 95 % half-widths)"
+                                                : "  significant"));
       o << "  (";
       bool first = true;
       for (const auto& p : c.params) {
@@ -322,7 +340,7 @@ nlohmann::json likelihood_json(const LikelihoodStage& s) {
     jr["candidates"] = nlohmann::json::array();
     for (const auto& c : r.candidates) {
       nlohmann::json jc = {{"id", c.id}, {"lr", c.lr}, {"df", c.df}, {"p", c.p}, {"p_holm", c.p_holm}, {"alpha", c.alpha},
-                           {"significant", c.significant}, {"plausible", c.plausible}};
+                           {"significant", c.significant}, {"plausible", c.plausible}, {"relevance", c.relevance}};
       if (!c.plausible) jc["implausible_reason"] = c.implausible_reason;
       if (c.heldout_done)
         jc["heldout"] = {{"fold_gain_nats_per_trial", c.fold_gain_nats}, {"mean", c.heldout.mean}, {"se", c.heldout.se}, {"p", c.heldout.p_value}};
@@ -338,6 +356,30 @@ nlohmann::json likelihood_json(const LikelihoodStage& s) {
                       {"k_npm", {{z.k(0, 0), z.k(0, 1)}, {z.k(1, 0), z.k(1, 1)}}}};
   }
   return j;
+}
+
+PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOptions& po, EngineOptions eo, bool with_time_varying) {
+  PlanarRun r;
+  if (eo.progress)
+    eo.progress("isolating the variational signals (eq. 21)" + std::string(po.pem_baseline ? " and fitting the default method" : ""));
+  r.prep = prepare_planar(sessions, po, eo.folds);
+  r.lib = planar_library(po.nuisance_order, with_time_varying);
+  eo.require_plausible = true;
+  eo.rank_by_t = true;
+  eo.prefer_simpler = true;
+  r.dg = diagnose(r.prep.data, r.lib, eo);
+  if (r.dg.misfit_found() && po.pem_baseline) {
+    if (eo.progress) eo.progress("refitting the default method with the extension");
+    const auto corr = extension_correction(r.prep.data, r.dg, r.lib);
+    r.prep.pem_extended = fit_default_method(r.prep, &corr);
+    r.prep.refined = refine_with_default_method(r.prep, r.dg, r.lib, eo.progress);
+  }
+  if (po.pem_baseline)
+    r.lk = likelihood_stage(r.prep, r.dg, r.lib, eo.alpha, eo.folds, eo.progress);
+  else
+    r.lk.error = "the default method was not fitted (--no-default-method)";
+  r.concl = conclude(r.dg, r.lk, r.prep);
+  return r;
 }
 
 Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarPrepared& prep) {

@@ -46,6 +46,14 @@ struct LikelihoodCandidate {
   double nll0 = 0.0, nll = 0.0, lr = 0.0, p = 1.0, p_holm = 1.0;
   bool significant = false, plausible = true;
   std::string implausible_reason;
+  // Practical relevance: the largest change of a D or K element (curl
+  // included in K) that modelling the mechanism makes, in units of that
+  // element's 95 % half-width of the estimate without it. A significant
+  // mechanism that moves no element by its own uncertainty (relevance < 1)
+  // is reported as "significant, negligible" and not named: it does not
+  // change what the lab measures (seen on clean sessions: an inertia a few
+  // per cent off the a-priori M_BSP, LR 7-9).
+  double relevance = 0.0;
   std::vector<ParamEstimate> params;  // shape params, then α × gains
   PemBaseline fit;                    // default method at the optimum (accepted ones included)
   // Accepted candidates only: cross-validation over trials (folds of
@@ -100,5 +108,23 @@ struct Conclusion {
 [[nodiscard]] Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarPrepared& prep);
 [[nodiscard]] std::string conclusion_text(const Conclusion& c, const Diagnosis& dg);
 [[nodiscard]] nlohmann::json conclusion_json(const Conclusion& c);
+
+}  // namespace manip::diagnosis
+
+namespace manip::diagnosis {
+
+// The whole manipulandum diagnosis as diagnose_model runs it: prepare the
+// sessions' trials, the equation-error search (with the manipulandum's rules:
+// plausible parameters, t ranking, parsimony), the default method refitted
+// with its extension, the likelihood check and the conclusion.
+struct PlanarRun {
+  PlanarPrepared prep;
+  std::vector<std::unique_ptr<Mechanism>> lib;
+  Diagnosis dg;
+  LikelihoodStage lk;
+  Conclusion concl;
+};
+[[nodiscard]] PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOptions& po, EngineOptions eo,
+                                   bool with_time_varying = false);
 
 }  // namespace manip::diagnosis

@@ -1,0 +1,167 @@
+#pragma once
+// Hidden-mechanism sessions diagnosed as diagnose_model does (run_planar),
+// shared by the manipulandum diagnosis tests: the simulation writes into the
+// diagnosis' LogCollector exactly as into a log (truth channels dropped), the
+// truth for the checks comes from the generator.
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "manip/diagnosis/likelihood_stage.hpp"
+#include "manip/diagnosis/manipulandum.hpp"
+#include "manip/sim/hidden_effects.hpp"
+#include "manip/sim/presets.hpp"
+
+#include <catch2/catch.hpp>
+
+namespace manip::diagnosis::testing {
+
+using Eigen::Matrix2d;
+
+
+struct Outcome {
+  Diagnosis dg;
+  PemBaseline pem, pem_ext;  // pem_ext: the equation-error extension refitted, amplitude refined by the likelihood
+  double alpha = 1.0;
+  Matrix2d d_app{Matrix2d::Zero()}, k_app{Matrix2d::Zero()};      // apparent truth (sim/truth.hpp)
+  Matrix2d d_intr{Matrix2d::Zero()}, k_intr{Matrix2d::Zero()};    // the person's intrinsic D, K (scaled by the draw)
+  sim::HiddenDraw draw;
+  int perturbed = 0;
+  LikelihoodStage lk;  // the likelihood check (likelihood_stage.hpp)
+  Conclusion concl;    // what diagnose_model names, and the corrected D, K
+  [[nodiscard]] const LikelihoodCandidate* named_fit(const std::string& id) const {
+    for (const auto& c : lk.accepted_fits)
+      if (c.id == id) return &c;
+    return nullptr;
+  }
+};
+
+struct Case {
+  std::vector<sim::HiddenEffect> effects;
+  std::uint64_t hidden_seed = 1;
+  int movements = 100;
+  int reps = 3;
+  sim::NoiseLevel noise = sim::NoiseLevel::realistic;
+  int bootstrap = 50;
+};
+
+inline Outcome run_case(const Case& c) {
+  sim::SessionDesign base;
+  base.n_movements = c.movements;
+  base.reps_per_angle = c.reps;
+  base.session.source = "manip_sim/linear";
+  auto person = sim::table1_person();
+  sim::apply_noise(c.noise, base, person);
+  auto hs = sim::make_hidden_session(base, person, c.effects, c.hidden_seed);
+  std::vector<CollectedSession> ses(1);
+  ses[0].name = "hidden";
+  LogCollector col(ses[0]);
+  const auto sum = sim::run_session(hs.design, *hs.person, col);
+  col.finish();
+  Outcome o;
+  o.draw = hs.draw;
+  o.perturbed = sum.perturbed;
+  if (sum.apparent) {
+    o.d_app = sum.apparent->d_nspm;
+    o.k_app = sum.apparent->k_npm;
+  }
+  o.d_intr = person.d_nspm * hs.draw.impedance_scale;
+  o.k_intr = person.k_npm * hs.draw.impedance_scale;
+  PlanarOptions po;
+  if (const char* ord = std::getenv("MANIP_MSTUDY_ORDER")) po.nuisance_order = std::atoi(ord);
+  EngineOptions eo;
+  eo.bootstrap = c.bootstrap;
+  auto run = run_planar(ses, po, eo);
+  o.dg = std::move(run.dg);
+  o.pem = run.prep.pem;
+  if (o.dg.misfit_found()) {
+    o.pem_ext = run.prep.refined.fit;
+    o.alpha = run.prep.refined.alpha;
+  } else {
+    o.pem_ext = run.prep.pem;
+  }
+  o.lk = std::move(run.lk);
+  o.concl = std::move(run.concl);
+  return o;
+}
+
+inline double rel(double est, double truth) { return (est - truth) / std::fabs(truth); }
+
+// Pooled K and D accuracy in the sense of the issue: the largest relative
+// error of the diagonal elements (the off-diagonals are small and their
+// relative errors meaningless), D within 20 %, K within 10 %.
+inline double worst_diag(const Matrix2d& e, const Matrix2d& t) {
+  return std::max(std::fabs(rel(e(0, 0), t(0, 0))), std::fabs(rel(e(1, 1), t(1, 1))));
+}
+
+// Pooled accuracy as a matrix: ‖estimate − truth‖_F / ‖truth‖_F (D22 alone is
+// small, 5-7 N s/m, and the clean `pem` misses it by up to 25 % on single
+// sessions; docs/diagnosis.md).
+inline double frob(const Matrix2d& e, const Matrix2d& t) { return (e - t).norm() / t.norm(); }
+
+inline std::string show(const Matrix2d& m) {
+  std::ostringstream o;
+  o.precision(4);
+  o << "[" << m(0, 0) << " " << m(0, 1) << "; " << m(1, 0) << " " << m(1, 1) << "]";
+  return o.str();
+}
+
+
+// The main parameter of each mechanism and its true value.
+struct MainParam {
+  std::string id, param;
+  double truth;
+};
+inline MainParam main_param_of(const sim::HiddenEffect& e, const sim::HiddenDraw& draw, double fs) {
+  switch (e.mechanism) {
+    case sim::HiddenMechanism::actuation_delay:
+      return {"actuation_delay", "delay", static_cast<double>(draw.actuation_delay_cycles) / fs};
+    case sim::HiddenMechanism::stage_friction: return {"stage_friction", "F_coulomb", e.magnitude};
+    case sim::HiddenMechanism::handle_mass: return {"handle_mass", "handle_extra", e.magnitude};
+    case sim::HiddenMechanism::reflex: return {"short_latency_reflex", "delay", draw.reflex_delay_s};
+    case sim::HiddenMechanism::curl: return {"curl_stiffness", "curl_c", e.magnitude};
+    case sim::HiddenMechanism::sensor_lag: return {"force_sensor_lag", "sensor_lag", e.magnitude};
+    // Offset and drift have no mechanism (removed by the isolation; docs/diagnosis.md).
+    case sim::HiddenMechanism::sensor_offset:
+    case sim::HiddenMechanism::sensor_drift: return {"(none)", "", e.magnitude};
+  }
+  return {};
+}
+
+// What diagnose_model concludes (the likelihood check decides, see
+// likelihood_stage.hpp): the hidden mechanism named first, its main parameter
+// within 20 % (gains: the amplitude at the likelihood optimum; shapes: the
+// equation-error grid), a positive held-out likelihood gain, and the
+// corrected D, K against the apparent truth (the intrinsic truth for the
+// reflex: the extension separates it from the intrinsic part).
+inline void check_named(const Case& c, const Outcome& o) {
+  const auto& e = c.effects.front();
+  const auto mp = main_param_of(e, o.draw, 4000.0);
+  INFO("hidden " << sim::to_string(e) << ", seed " << c.hidden_seed << "; named: " << (o.concl.named.empty() ? "none" : o.concl.named.front())
+                 << " (equation error: " << (o.dg.accepted.empty() ? "none" : o.dg.accepted.front()) << ")");
+  REQUIRE(o.lk.available);
+  REQUIRE_FALSE(o.concl.named.empty());
+  CHECK(o.concl.named.front() == mp.id);
+  const auto* f = o.named_fit(mp.id);
+  REQUIRE(f);
+  double v = NAN;
+  for (const auto& p : f->params)
+    if (p.name == mp.param) v = p.est.value;
+  INFO(mp.param << " = " << v << " (truth " << mp.truth << ")");
+  CHECK(std::fabs(rel(v, mp.truth)) < 0.20);
+  REQUIRE(f->heldout_done);
+  INFO("held-out likelihood gain " << f->heldout.mean << " +- " << f->heldout.se << " nats per trial");
+  CHECK(f->heldout.mean > 0.0);
+  const bool reflex = e.mechanism == sim::HiddenMechanism::reflex;
+  const Matrix2d kt = reflex ? o.k_intr : o.k_app, dt = reflex ? o.d_intr : o.d_app;
+  REQUIRE(o.concl.has_corrected);
+  const auto& z = o.concl.corrected;
+  INFO("K after " << show(z.k) << " truth " << show(kt) << "; D after " << show(z.d) << " truth " << show(dt));
+  CHECK(frob(z.k, kt) < 0.10);
+  CHECK(frob(z.d, dt) < 0.20);
+  // The mechanism did move the default estimate (else the test proves nothing).
+  CHECK(frob(o.pem.k, kt) > 0.10);
+}
+}  // namespace manip::diagnosis::testing
