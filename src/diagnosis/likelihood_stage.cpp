@@ -1,6 +1,11 @@
 #include "manip/diagnosis/likelihood_stage.hpp"
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <exception>
+#include <mutex>
+#include <thread>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -67,6 +72,34 @@ Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaselin
   return out;
 }
 
+// Runs f(0..n-1) on up to hardware_concurrency threads (each `pem` fit is
+// independent and reads the prepared data only); the first exception is
+// rethrown here.
+void parallel_for(std::size_t n, const std::function<void(std::size_t)>& f) {
+  const std::size_t nt = std::min<std::size_t>(n, std::max(1u, std::thread::hardware_concurrency()));
+  if (nt <= 1) {
+    for (std::size_t i = 0; i < n; ++i) f(i);
+    return;
+  }
+  std::atomic<std::size_t> next{0};
+  std::exception_ptr err;
+  std::mutex err_mutex;
+  std::vector<std::thread> pool;
+  for (std::size_t t = 0; t < nt; ++t)
+    pool.emplace_back([&] {
+      for (std::size_t i = next++; i < n; i = next++) {
+        try {
+          f(i);
+        } catch (...) {
+          const std::lock_guard<std::mutex> lock(err_mutex);
+          if (!err) err = std::current_exception();
+        }
+      }
+    });
+  for (auto& th : pool) th.join();
+  if (err) std::rethrow_exception(err);
+}
+
 // Held-out check of one accepted candidate: folds of neighbouring trials;
 // per fold both models are fitted on the other trials (the candidate's
 // amplitude profiled there) and scored by the likelihood of the held-out
@@ -75,18 +108,20 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
                    const std::function<Correction(double)>& corr_m, LikelihoodCandidate& lc, int& evaluations) {
   const std::size_t n = prep.pw.size();
   if (folds < 3 || n < static_cast<std::size_t>(folds)) return;
-  for (int k = 0; k < folds; ++k) {
+  std::vector<double> gain(static_cast<std::size_t>(folds), std::numeric_limits<double>::quiet_NaN());
+  std::vector<int> evals(static_cast<std::size_t>(folds), 0);
+  parallel_for(static_cast<std::size_t>(folds), [&](std::size_t ku) {
+    const int k = static_cast<int>(ku);
     std::vector<std::size_t> train, test;
     for (std::size_t i = 0; i < n; ++i) (static_cast<int>(i * static_cast<std::size_t>(folds) / n) == k ? test : train).push_back(i);
     const PemBaseline base = fit_default_method(prep, acc.empty() ? nullptr : &acc, &train);
-    ++evaluations;
     const auto pr = profile(
         [&](double a) {
           const auto c = add(acc, corr_m(a));
           return fit_default_method(prep, &c, &train);
         },
         base);
-    evaluations += pr.evaluations;
+    evals[ku] = 1 + pr.evaluations;
     if (!base.has_likelihood || !pr.fit.has_likelihood) return;
     auto test_nll = [&](const Correction* c, const PemBaseline& f) {
       const auto all = corrected_pem_windows(prep, c);
@@ -100,7 +135,12 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
     const auto c_ext = add(acc, corr_m(pr.alpha));
     const double before = test_nll(acc.empty() ? nullptr : &acc, base);
     const double after = test_nll(&c_ext, pr.fit);
-    lc.fold_gain_nats.push_back((before - after) / static_cast<double>(test.size()));
+    gain[ku] = (before - after) / static_cast<double>(test.size());
+  });
+  for (std::size_t k = 0; k < gain.size(); ++k) {
+    evaluations += evals[k];
+    if (!std::isfinite(gain[k])) return;  // a fold without a likelihood: no held-out check
+    lc.fold_gain_nats.push_back(gain[k]);
   }
   lc.heldout = stats::one_sided_t(lc.fold_gain_nats);
   lc.heldout_done = true;
@@ -177,16 +217,24 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
   for (std::size_t round = 0; round < cands.size(); ++round) {
     LikelihoodRound rd;
     std::vector<std::size_t> idx;
-    for (std::size_t i = 0; i < cands.size(); ++i) {
-      if (used[i]) continue;
-      const auto& c = cands[i];
-      if (progress) progress("likelihood check, round " + std::to_string(round + 1) + ": " + c.mech->id());
-      const auto pr = profile(
+    std::vector<std::size_t> todo;
+    for (std::size_t i = 0; i < cands.size(); ++i)
+      if (!used[i]) todo.push_back(i);
+    if (progress) progress("likelihood check, round " + std::to_string(round + 1) + ": profiling " + std::to_string(todo.size()) + " candidates");
+    std::vector<Profile> profiles(todo.size());
+    parallel_for(todo.size(), [&](std::size_t t) {
+      const auto& c = cands[todo[t]];
+      profiles[t] = profile(
           [&](double a) {
             const auto corr = add(acc, correction_of(c, a));
             return fit_default_method(prep, &corr);
           },
           cur);
+    });
+    for (std::size_t t = 0; t < todo.size(); ++t) {
+      const std::size_t i = todo[t];
+      const auto& c = cands[i];
+      const auto& pr = profiles[t];
       st.evaluations += pr.evaluations;
       LikelihoodCandidate lc;
       lc.id = c.mech->id();
@@ -358,7 +406,9 @@ nlohmann::json likelihood_json(const LikelihoodStage& s) {
   return j;
 }
 
-PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOptions& po, EngineOptions eo, bool with_time_varying) {
+PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOptions& po, EngineOptions eo, bool with_time_varying,
+                     int heldout_folds) {
+  const auto t0 = std::chrono::steady_clock::now();
   PlanarRun r;
   if (eo.progress)
     eo.progress("isolating the variational signals (eq. 21)" + std::string(po.pem_baseline ? " and fitting the default method" : ""));
@@ -375,10 +425,11 @@ PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOption
     r.prep.refined = refine_with_default_method(r.prep, r.dg, r.lib, eo.progress);
   }
   if (po.pem_baseline)
-    r.lk = likelihood_stage(r.prep, r.dg, r.lib, eo.alpha, eo.folds, eo.progress);
+    r.lk = likelihood_stage(r.prep, r.dg, r.lib, eo.alpha, heldout_folds < 0 ? eo.folds : heldout_folds, eo.progress);
   else
     r.lk.error = "the default method was not fitted (--no-default-method)";
   r.concl = conclude(r.dg, r.lk, r.prep);
+  r.dg.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();  // the report's "diagnosis took": all of it
   return r;
 }
 

@@ -45,6 +45,7 @@ struct Case {
   int reps = 3;
   sim::NoiseLevel noise = sim::NoiseLevel::realistic;
   int bootstrap = 50;
+  int heldout_folds = -1;  // the likelihood check's held-out folds (-1: the engine's 10)
 };
 
 inline Outcome run_case(const Case& c) {
@@ -73,7 +74,7 @@ inline Outcome run_case(const Case& c) {
   if (const char* ord = std::getenv("MANIP_MSTUDY_ORDER")) po.nuisance_order = std::atoi(ord);
   EngineOptions eo;
   eo.bootstrap = c.bootstrap;
-  auto run = run_planar(ses, po, eo);
+  auto run = run_planar(ses, po, eo, false, c.heldout_folds);
   o.dg = std::move(run.dg);
   o.pem = run.prep.pem;
   if (o.dg.misfit_found()) {

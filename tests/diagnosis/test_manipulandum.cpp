@@ -299,6 +299,7 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
       Case c;
       c.effects = eff;
       c.hidden_seed = first_seed + static_cast<std::uint64_t>(s);
+      c.heldout_folds = 5;  // the study's held-out check: 5 folds (half the pem fits; only the "held-out gain > 0" column depends on it)
       const auto o = run_case(c);
       const bool reflex = !eff.empty() && eff.front().mechanism == sim::HiddenMechanism::reflex;
       Matrix2d kt = reflex ? o.k_intr : o.k_app, dt = reflex ? o.d_intr : o.d_app;

@@ -124,7 +124,8 @@ struct PlanarRun {
   LikelihoodStage lk;
   Conclusion concl;
 };
+// heldout_folds: of the likelihood check's held-out check (-1: eo.folds, 0: none).
 [[nodiscard]] PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOptions& po, EngineOptions eo,
-                                   bool with_time_varying = false);
+                                   bool with_time_varying = false, int heldout_folds = -1);
 
 }  // namespace manip::diagnosis
