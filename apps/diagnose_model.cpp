@@ -8,7 +8,6 @@
 #include <filesystem>
 #include <iostream>
 #include <optional>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -18,6 +17,7 @@
 #include "manip/common/errors.hpp"
 #include "manip/common/exit_codes.hpp"
 #include "manip/common/output_file.hpp"
+#include "manip/common/temp_dir.hpp"
 #include "manip/diagnosis/engine.hpp"
 #include "manip/diagnosis/likelihood_stage.hpp"
 #include "manip/diagnosis/manipulandum.hpp"
@@ -56,18 +56,8 @@ void check_plots_dir(const std::string& dir, bool force) {
 // (files moved into DIR only when all were drawn; an existing file is
 // replaced only with --force).
 void draw_plots(const nlohmann::json& j, const std::string& dir, bool force) {
-  std::error_code e;
-  std::mt19937_64 rng(std::random_device{}());
-  const fs::path tmp = fs::temp_directory_path(e) / ("diagnose_model_" + std::to_string(rng() % 1000000000));
-  fs::create_directories(tmp, e);
-  if (e) throw manip::OutputError(tmp.string() + ": cannot create a temporary directory (" + e.message() + ")");
-  struct Cleanup {
-    fs::path p;
-    ~Cleanup() {
-      std::error_code x;
-      fs::remove_all(p, x);
-    }
-  } cleanup{tmp};
+  const manip::ScopedTempDir tmp_dir("diagnose_model");
+  const fs::path& tmp = tmp_dir.path();
   const std::string results = (tmp / "diagnosis.json").string();
   manip::write_file_atomically(results, j.dump(1) + "\n", true);
   const auto r = manip::estimation::render_module_into("manipplot.diagnosis", {results}, "png,pdf", dir, force);

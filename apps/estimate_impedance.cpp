@@ -4,10 +4,10 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
-#include <random>
 
 #include "manip/common/cli.hpp"
 #include "manip/common/errors.hpp"
+#include "manip/common/temp_dir.hpp"
 #include "manip/common/exit_codes.hpp"
 #include "manip/common/output_file.hpp"
 #include "manip/estimation/group.hpp"
@@ -84,22 +84,6 @@ void check_dir(const std::string& opt, const std::string& dir, bool force) {
   if (fs::exists(dir, e) && !fs::is_directory(dir, e)) throw manip::OutputError(opt + " " + dir + ": exists and is not a directory");
 }
 
-struct TempDir {
-  fs::path p;
-  TempDir() {
-    std::error_code e;
-    std::mt19937_64 rng(std::random_device{}());
-    p = fs::temp_directory_path(e) / ("estimate_impedance_" + std::to_string(rng() % 1000000000));
-    fs::create_directories(p, e);
-    if (e) throw manip::OutputError(p.string() + ": cannot create a temporary directory (" + e.message() + ")");
-  }
-  ~TempDir() {
-    std::error_code e;
-    fs::remove_all(p, e);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-};
 
 int run(int argc, char** argv) {
   using namespace manip::estimation;
@@ -207,9 +191,9 @@ int run(int argc, char** argv) {
                         {"settings", settings_to_json(s)},
                         {"sessions", nlohmann::json::array()}};
   // Signals for --plots/--report when the user did not ask for them: a temporary directory.
-  std::optional<TempDir> tmp;
-  if ((!plots_dir.empty() || !report_path.empty()) && (signals_dir.empty() || json_path.empty())) tmp.emplace();
-  const std::string sig_root = !signals_dir.empty() ? signals_dir : (tmp ? (tmp->p / "signals").string() : std::string());
+  std::optional<manip::ScopedTempDir> tmp;
+  if ((!plots_dir.empty() || !report_path.empty()) && (signals_dir.empty() || json_path.empty())) tmp.emplace("estimate_impedance");
+  const std::string sig_root = !signals_dir.empty() ? signals_dir : (tmp ? (tmp->path() / "signals").string() : std::string());
   for (const auto& log : logs) {
     if (!quiet) std::cerr << "estimate_impedance: reading " << log << " ...\n";
     Report r;
@@ -273,7 +257,7 @@ int run(int argc, char** argv) {
   if ((!plots_dir.empty() || !report_path.empty()) && !reports.empty()) {
     std::string results = json_path;
     if (results.empty() || rc == ec::kOutput) {
-      results = (tmp->p / "results.json").string();
+      results = (tmp->path() / "results.json").string();
       output([&] { manip::write_file_atomically(results, all.dump(1) + "\n", true); });
     }
     // --log: the log itself, or (several logs) a directory of links to them.
@@ -281,7 +265,7 @@ int run(int argc, char** argv) {
     if (reports.size() == 1) {
       log_arg = reports.front().first;
     } else if (tmp) {
-      const fs::path d = tmp->p / "logs";
+      const fs::path d = tmp->path() / "logs";
       std::error_code e;
       fs::create_directories(d, e);
       for (const auto& [log, r] : reports) fs::create_symlink(fs::absolute(log, e), d / fs::path(log).filename(), e);

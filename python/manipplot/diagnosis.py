@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from .figures import COLUMN_IN, RC, _fig, _style, save  # noqa: E402
+from .figures import COLUMN_IN, RC, _fig, _style, add_output_options, output_formats, save  # noqa: E402
 
 # before (baseline) / after (extended model): colour *and* line style / marker differ.
 BEFORE = dict(color="#0072B2", ls="--", marker="o")
@@ -378,14 +378,9 @@ def figures(rep: dict, notes: Optional[List[str]] = None) -> Dict[str, Figure]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python3 -m manipplot.diagnosis", description=__doc__.split("\n\n")[0])
     ap.add_argument("report", help="diagnose_model --json output")
-    ap.add_argument("--format", default="png,pdf", help="comma-separated: png, pdf, svg (default png,pdf)")
-    ap.add_argument("--dpi", type=float, default=200, help="PNG resolution (default 200)")
-    ap.add_argument("-o", "--out", required=True, help="output directory")
+    add_output_options(ap)
     a = ap.parse_args(argv)
-    fmts = [f.strip() for f in a.format.split(",") if f.strip()]
-    bad = [f for f in fmts if f not in ("png", "pdf", "svg")]
-    if bad:
-        ap.error("unknown format(s): %s" % ", ".join(bad))
+    fmts = output_formats(ap, a)
     try:
         with open(a.report, encoding="utf-8") as f:
             rep = json.load(f)

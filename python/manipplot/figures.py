@@ -78,6 +78,22 @@ def save(fig: Figure, path_stem: str, formats: Sequence[str] = ("png", "pdf"), d
     return out
 
 
+def add_output_options(ap, dpi_help: str = "PNG resolution (default 200)") -> None:
+    """The output options every figure command shares: --format, --dpi, -o/--out."""
+    ap.add_argument("--format", default="png,pdf", help="comma-separated: png, pdf, svg (default png,pdf)")
+    ap.add_argument("--dpi", type=float, default=200, help=dpi_help)
+    ap.add_argument("-o", "--out", required=True, help="output directory")
+
+
+def output_formats(ap, a) -> List[str]:
+    """The --format list, or the parser's usage error (exit 2) naming what is unknown."""
+    fmts = [f.strip() for f in a.format.split(",") if f.strip()]
+    bad = [f for f in fmts if f not in ("png", "pdf", "svg")]
+    if bad:
+        ap.error("unknown format(s): %s" % ", ".join(bad))
+    return fmts
+
+
 def _text(fig, **kw):
     with matplotlib.rc_context(RC):
         return fig

@@ -28,14 +28,9 @@ def main(argv=None) -> int:
     ap.add_argument("--validation", help="manip_sim --validate DIR/validation.json (Fig. 4 without the log)")
     ap.add_argument("--method", action="append", help="methods for per-angle figures (default: all in the JSON)")
     ap.add_argument("--all-trials", action="store_true", help="Fig. 5 for every exported trial (default: first)")
-    ap.add_argument("--format", default="png,pdf", help="comma-separated: png, pdf, svg (default png,pdf)")
-    ap.add_argument("--dpi", type=float, default=200, help="PNG resolution (default 200: 700 px at 3.5 in)")
-    ap.add_argument("-o", "--out", required=True, help="output directory")
+    B.F.add_output_options(ap, "PNG resolution (default 200: 700 px at 3.5 in)")
     a = ap.parse_args(argv)
-    fmts = [f.strip() for f in a.format.split(",") if f.strip()]
-    bad = [f for f in fmts if f not in ("png", "pdf", "svg")]
-    if bad:
-        ap.error("unknown format(s): %s" % ", ".join(bad))
+    fmts = B.F.output_formats(ap, a)
     try:
         res = load_results(a.results)
         inputs = B.resolve_inputs(res, a.signals, a.log, a.validation)
