@@ -23,6 +23,10 @@ if [ "${MANIP_SKIP_SANITIZERS:-0}" != "1" ]; then
     -DMANIP_BENCH=OFF >/dev/null
   ninja -C build-asan
   echo "== tests under sanitizers ==" >&2
+  # One hidden-session diagnosis (~50 s of CPU in Release, 3-5x that under
+  # ASan) is left to the Release pass: the handle-mass case takes the same
+  # code paths as the friction and delay cases, which run here too.
+  asan_skip="diagnosis:manipulandum: hidden handle mass"
   (cd build-asan && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-    ctest --output-on-failure -j "$jobs" -LE no_sanitize)
+    ctest --output-on-failure -j "$jobs" -LE no_sanitize -E "$asan_skip")
 fi

@@ -48,7 +48,7 @@ struct LikelihoodCandidate {
   std::string implausible_reason;
   // Practical relevance: the largest change of a D or K element (curl
   // included in K) that modelling the mechanism makes, in units of that
-  // element's 95 % half-width of the estimate without it. A significant
+  // element's 95 % half-width in the corrected estimate. A significant
   // mechanism that moves no element by its own uncertainty (relevance < 1)
   // is reported as "significant, negligible" and not named: it does not
   // change what the lab measures (seen on clean sessions: an inertia a few
