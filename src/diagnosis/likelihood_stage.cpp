@@ -1,6 +1,7 @@
 #include "manip/diagnosis/likelihood_stage.hpp"
 
 #include <algorithm>
+#include <optional>
 #include <atomic>
 #include <chrono>
 #include <exception>
@@ -104,7 +105,7 @@ void parallel_for(std::size_t n, const std::function<void(std::size_t)>& f) {
 // per fold both models are fitted on the other trials (the candidate's
 // amplitude profiled there) and scored by the likelihood of the held-out
 // trials at those fits.
-void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
+void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc, const PemBaseline& start,
                    const std::function<Correction(double)>& corr_m, LikelihoodCandidate& lc, int& evaluations) {
   const std::size_t n = prep.pw.size();
   if (folds < 3 || n < static_cast<std::size_t>(folds)) return;
@@ -114,11 +115,11 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
     const int k = static_cast<int>(ku);
     std::vector<std::size_t> train, test;
     for (std::size_t i = 0; i < n; ++i) (static_cast<int>(i * static_cast<std::size_t>(folds) / n) == k ? test : train).push_back(i);
-    const PemBaseline base = fit_default_method(prep, acc.empty() ? nullptr : &acc, &train);
+    const PemBaseline base = fit_default_method(prep, acc.empty() ? nullptr : &acc, &train, &start);
     const auto pr = profile(
         [&](double a) {
           const auto c = add(acc, corr_m(a));
-          return fit_default_method(prep, &c, &train);
+          return fit_default_method(prep, &c, &train, &base);
         },
         base);
     evals[ku] = 1 + pr.evaluations;
@@ -188,6 +189,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     const Mechanism* mech;
     std::vector<double> setting;
     std::vector<double> gains_ee;
+    // Shapes profiled by the likelihood too (empty: the equation-error one).
+    std::vector<std::vector<double>> shapes{};
+    // > 0: the direction is this fixed gain, not the equation-error one
+    // (correction at α = extension_correction at α × unit_scale).
+    double fixed_gain = 0.0, unit_scale = 1.0;
   };
   std::vector<Cand> cands;
   for (const auto& c : dg.rounds.front().candidates) {
@@ -197,16 +203,43 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       if (l->id() == c.id) m = l.get();
     if (!m) continue;
     Cand k{m, c.setting, {}};
-    const auto cols = m->columns(d, c.setting);
-    const auto f = fit_full(d, {&cols});
-    for (std::size_t g = 0; g < m->gains().size(); ++g) k.gains_ee.push_back(f.theta(static_cast<Eigen::Index>(d.n_base() + g)));
+    // The reflex's delay: the equation-error pick is noise at realistic gains
+    // (its detection limit there is above the intrinsic impedance), so the
+    // likelihood profiles a coarse delay grid inside the search range too.
+    // Its direction is fixed too (gain_apparent 0.25 per unit α: α in [−2, 3]
+    // spans the physiological range), since a noisy equation-error gain
+    // would put a real reflex outside the profile's range of α.
+    if (c.id == "short_latency_reflex") {
+      k.shapes = {{0.025}, {0.030}, {0.035}, {0.040}, {0.050}};
+      k.fixed_gain = 0.25;
+    }
+    if (k.shapes.empty()) k.shapes = {c.setting};
     cands.push_back(std::move(k));
   }
+  auto gains_at = [&](const Cand& c, const std::vector<double>& setting) {
+    const auto cols = c.mech->columns(d, setting);
+    const auto f = fit_full(d, {&cols});
+    std::vector<double> g;
+    for (std::size_t j = 0; j < c.mech->gains().size(); ++j) g.push_back(f.theta(static_cast<Eigen::Index>(d.n_base() + j)));
+    return g;
+  };
+  // The equation-error gains at the candidate's setting, or the fixed
+  // direction (then α is rescaled to it).
+  auto set_shape = [&](Cand& c, const std::vector<double>& setting) {
+    c.setting = setting;
+    c.gains_ee = gains_at(c, setting);
+    c.unit_scale = 1.0;
+    if (c.fixed_gain > 0 && c.gains_ee.size() == 1 && std::fabs(c.gains_ee[0]) > 1e-12) {
+      c.unit_scale = c.fixed_gain / c.gains_ee[0];
+      c.gains_ee[0] = c.fixed_gain;
+    }
+  };
+  for (auto& c : cands) set_shape(c, c.setting);
   auto correction_of = [&](const Cand& c, double a) {
     Diagnosis one;
     one.accepted = {c.mech->id()};
     one.accepted_settings = {c.setting};
-    return extension_correction(d, one, lib, a);
+    return extension_correction(d, one, lib, a * c.unit_scale);
   };
 
   st.available = true;
@@ -221,21 +254,36 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     for (std::size_t i = 0; i < cands.size(); ++i)
       if (!used[i]) todo.push_back(i);
     if (progress) progress("likelihood check, round " + std::to_string(round + 1) + ": profiling " + std::to_string(todo.size()) + " candidates");
-    std::vector<Profile> profiles(todo.size());
-    parallel_for(todo.size(), [&](std::size_t t) {
-      const auto& c = cands[todo[t]];
-      profiles[t] = profile(
+    // One profile per (candidate, shape); each candidate keeps its best shape.
+    std::vector<std::pair<std::size_t, std::size_t>> jobs;
+    for (std::size_t t = 0; t < todo.size(); ++t)
+      for (std::size_t h = 0; h < cands[todo[t]].shapes.size(); ++h) jobs.emplace_back(t, h);
+    std::vector<Profile> job_profiles(jobs.size());
+    parallel_for(jobs.size(), [&](std::size_t j) {
+      Cand c = cands[todo[jobs[j].first]];
+      set_shape(c, c.shapes[jobs[j].second]);
+      job_profiles[j] = profile(
           [&](double a) {
             const auto corr = add(acc, correction_of(c, a));
-            return fit_default_method(prep, &corr);
+            return fit_default_method(prep, &corr, nullptr, &cur);
           },
           cur);
     });
+    std::vector<Profile> profiles(todo.size());
+    std::vector<int> best_job(todo.size(), -1);
+    for (std::size_t j = 0; j < jobs.size(); ++j) {
+      const auto t = jobs[j].first;
+      st.evaluations += job_profiles[j].evaluations;
+      if (best_job[t] < 0 || nll_of(job_profiles[j].fit) < nll_of(profiles[t].fit)) {
+        best_job[t] = static_cast<int>(j);
+        profiles[t] = job_profiles[j];
+      }
+    }
     for (std::size_t t = 0; t < todo.size(); ++t) {
       const std::size_t i = todo[t];
-      const auto& c = cands[i];
+      auto& c = cands[i];
+      if (c.shapes.size() > 1) set_shape(c, c.shapes[jobs[static_cast<std::size_t>(best_job[t])].second]);
       const auto& pr = profiles[t];
-      st.evaluations += pr.evaluations;
       LikelihoodCandidate lc;
       lc.id = c.mech->id();
       lc.setting = c.setting;
@@ -283,6 +331,12 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
           lc.implausible_reason = gs[g].name + " " + g4(v) + " " + gs[g].unit + " outside " + g4(gs[g].plausible_lo) + " … " + g4(gs[g].plausible_hi);
         }
       }
+      if (lc.id == "short_latency_reflex" && pr.fit.available && std::fabs(pr.fit.k.trace()) > 0) {
+        // The column copies the apparent D, K ≈ (1 + g) × intrinsic; against
+        // the corrected (intrinsic) K the reflex gain is g = g_app tr K_app / tr K.
+        const double g = lc.alpha * c.gains_ee.front() * d.planar_ref_k.trace() / pr.fit.k.trace();
+        lc.params.push_back({"reflex_gain", "1", {g, g, g}, -0.2, 1.5, true});
+      }
       rd.candidates.push_back(std::move(lc));
       idx.push_back(i);
     }
@@ -308,7 +362,14 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     const auto ci = idx[static_cast<std::size_t>(win)];
     if (folds > 0) {
       if (progress) progress("likelihood check: held-out trials for " + w.id + " (" + std::to_string(folds) + " folds)");
-      heldout_check(prep, folds, acc, [&](double a) { return correction_of(cands[ci], a); }, w, st.evaluations);
+      heldout_check(prep, folds, acc, cur, [&](double a) { return correction_of(cands[ci], a); }, w, st.evaluations);
+      if (round > 0 && w.heldout_done && !(w.heldout.p_value < alpha)) {
+        w.heldout_rejected = true;
+        rd.accepted = -1;
+        if (progress) progress("likelihood check: " + w.id + " adds no significant held-out gain; not accepted");
+        st.rounds.push_back(std::move(rd));
+        break;
+      }
     }
     used[ci] = true;
     acc = add(acc, correction_of(cands[ci], w.alpha));
@@ -340,6 +401,8 @@ std::string likelihood_text(const LikelihoodStage& s) {
       o << line;
       if (static_cast<int>(i) == s.rounds[r].accepted)
         o << "  <- ACCEPTED";
+      else if (c.heldout_rejected)
+        o << "  significant, NO SIGNIFICANT HELD-OUT GAIN (not accepted)";
       else if (c.significant)
         o << (!c.plausible ? "  significant, IMPLAUSIBLE (" + c.implausible_reason + ")"
                            : (c.relevance < 1.0 ? "  significant, NEGLIGIBLE (moves D, K by " + g4(c.relevance) + " of their 95 % half-widths)"
@@ -395,6 +458,7 @@ nlohmann::json likelihood_json(const LikelihoodStage& s) {
       if (!c.plausible) jc["implausible_reason"] = c.implausible_reason;
       if (c.heldout_done)
         jc["heldout"] = {{"fold_gain_nats_per_trial", c.fold_gain_nats}, {"mean", c.heldout.mean}, {"se", c.heldout.se}, {"p", c.heldout.p_value}};
+      if (c.heldout_rejected) jc["heldout_rejected"] = true;
       for (const auto& p : c.params) jc["params"][p.name] = p.est.value;
       jr["candidates"].push_back(jc);
     }
@@ -424,7 +488,7 @@ PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOption
   if (r.dg.misfit_found() && po.pem_baseline) {
     if (eo.progress) eo.progress("refitting the default method with the extension");
     const auto corr = extension_correction(r.prep.data, r.dg, r.lib);
-    r.prep.pem_extended = fit_default_method(r.prep, &corr);
+    r.prep.pem_extended = fit_default_method(r.prep, &corr, nullptr, &r.prep.pem);
     r.prep.refined = refine_with_default_method(r.prep, r.dg, r.lib, eo.progress);
   }
   if (po.pem_baseline)
@@ -459,6 +523,39 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
       }
     }
   }
+  // A named inertia reduction is also a reflex (Alternative): the reflex
+  // gain that gives the same ΔM at a mid-range delay, against the corrected
+  // D, K (second-order expansion of the delayed terms).
+  auto value_of = [&](const std::string& id, const char* param) -> std::optional<double> {
+    if (c.decided_by == "likelihood") {
+      for (const auto& f : s.accepted_fits)
+        if (f.id == id)
+          for (const auto& p : f.params)
+            if (p.name == param) return p.est.value;
+      return std::nullopt;
+    }
+    if (std::find(dg.accepted.begin(), dg.accepted.end(), id) == dg.accepted.end()) return std::nullopt;
+    if (const auto* p = dg.find_final(param)) return p->est.value;
+    return std::nullopt;
+  };
+  if (c.has_corrected && !prep.data.planar.empty()) {
+    Eigen::Matrix2d m_bsp = Eigen::Matrix2d::Zero();
+    for (const auto& t : prep.data.planar) m_bsp += t.m_bsp;
+    m_bsp /= static_cast<double>(prep.data.planar.size());
+    constexpr double tau = 0.030;
+    const Eigen::Matrix2d per_gain = tau * tau / 2 * c.corrected.k - tau * c.corrected.d;  // ΔM per unit reflex gain
+    auto add_alt = [&](const std::string& named, const Eigen::Matrix2d& dm) {
+      const double den = per_gain.trace();
+      if (!(den < 0) || !(dm.trace() < 0)) return;
+      const double g = dm.trace() / den;
+      if (!(g > 0 && g <= 3)) return;
+      c.alternatives.push_back({named, "short_latency_reflex", g, tau,
+                                "within T_est a reflex g [D Δẋ(t - tau) + K Δx(t - tau)] acts as the inertia change g (tau² K/2 - tau D); "
+                                "this session cannot tell the two apart"});
+    };
+    if (const auto sv = value_of("wrong_segment_inertia", "mbsp_error")) add_alt("wrong_segment_inertia", *sv * m_bsp);
+    if (const auto hv = value_of("handle_mass", "handle_extra")) add_alt("handle_mass", *hv * Eigen::Matrix2d::Identity());
+  }
   return c;
 }
 
@@ -485,11 +582,17 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
     o << "  corrected impedance: D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; " << g4(c.corrected.d(1, 0)) << " "
       << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " " << g4(c.corrected.k(0, 1)) << "; " << g4(c.corrected.k(1, 0)) << " "
       << g4(c.corrected.k(1, 1)) << "] N/m\n";
+  for (const auto& a : c.alternatives)
+    o << "  or, for " << a.named << ": " << a.id << " of gain " << g4(a.gain) << " x the impedance at " << g4(a.delay_s * 1e3) << " ms (" << a.why
+      << "; docs/diagnosis.md)\n";
   return o.str();
 }
 
 nlohmann::json conclusion_json(const Conclusion& c) {
   nlohmann::json j = {{"decided_by", c.decided_by}, {"named", c.named}, {"misfit", !c.named.empty()}};
+  j["alternatives"] = nlohmann::json::array();
+  for (const auto& a : c.alternatives)
+    j["alternatives"].push_back({{"for", a.named}, {"id", a.id}, {"gain", a.gain}, {"delay_s", a.delay_s}, {"why", a.why}});
   if (c.has_corrected)
     j["corrected"] = {{"d_nspm", {{c.corrected.d(0, 0), c.corrected.d(0, 1)}, {c.corrected.d(1, 0), c.corrected.d(1, 1)}}},
                       {"k_npm", {{c.corrected.k(0, 0), c.corrected.k(0, 1)}, {c.corrected.k(1, 0), c.corrected.k(1, 1)}}}};

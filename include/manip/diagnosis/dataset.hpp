@@ -67,6 +67,10 @@ struct Dataset {
   double fixed_inertia = 0.0;
   std::vector<Segment> segments;
   std::vector<PlanarTrial> planar;  // planar (manipulandum) datasets only
+  // Planar: the session's apparent D, K (the default method's fit, else the
+  // equation-error baseline's), which the short-latency reflex copies with a
+  // delay (manipulandum.cpp, PlanarReflex).
+  Eigen::Matrix2d planar_ref_d = Eigen::Matrix2d::Zero(), planar_ref_k = Eigen::Matrix2d::Zero();
 
   [[nodiscard]] bool is_planar() const { return !planar.empty(); }
   [[nodiscard]] std::size_t n_base() const { return base_names.size(); }

@@ -65,6 +65,10 @@ struct LikelihoodCandidate {
   std::vector<double> fold_gain_nats;
   stats::OneSidedT heldout;
   bool heldout_done = false;
+  // From the second round on the held-out check decides: a further mechanism
+  // is named only when it adds a significant held-out gain (p < α); else the
+  // greedy search stops there (false second names, docs/diagnosis.md).
+  bool heldout_rejected = false;
 };
 
 struct LikelihoodRound {
@@ -99,11 +103,25 @@ struct LikelihoodStage {
 // default method has a likelihood (it uses the data more efficiently and
 // decides), else by the equation-error search; with the corrected D, K and,
 // when nothing was named, the session's detection limits.
+// An explanation the session cannot tell apart from a named one (so the
+// report names both): within T_est a short-latency reflex of gain g at
+// delay τ acts as an inertia change ΔM = g (τ²K/2 − τD) (docs/diagnosis.md,
+// "The short-latency reflex in a 150 ms window"), so a named inertia
+// reduction (M_BSP or handle mass below the configured) is also a reflex
+// of the gain that gives the same ΔM.
+struct Alternative {
+  std::string named;  // the named mechanism it stands next to
+  std::string id;     // the alternative mechanism
+  double gain = 0.0;  // its equivalent gain (reflex: × intrinsic impedance)
+  double delay_s = 0.0;
+  std::string why;
+};
 struct Conclusion {
   std::string decided_by;  // "likelihood" or "equation_error"
   std::vector<std::string> named;
   bool has_corrected = false;
   PlanarImpedance corrected;
+  std::vector<Alternative> alternatives;
 };
 [[nodiscard]] Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarPrepared& prep);
 [[nodiscard]] std::string conclusion_text(const Conclusion& c, const Diagnosis& dg);

@@ -147,9 +147,11 @@ struct PlanarPrepared {
 // (delayed u_pert, friction force, curl, handle mass, reflex) moved to the
 // input side with the gains of the equation-error fit.
 // `trials` (indices into the used trials): fit on these only (cross-validation), default all.
+// `start`: a neighbouring fit to start the iteration from (pem: warm start; same optimum, fewer iterations).
 [[nodiscard]] PemBaseline fit_default_method(const PlanarPrepared& prep,
                                              const std::vector<std::vector<Eigen::Vector2d>>* correction = nullptr,
-                                             const std::vector<std::size_t>* trials = nullptr);
+                                             const std::vector<std::size_t>* trials = nullptr,
+                                             const PemBaseline* start = nullptr);
 // The default method's windows with `correction` applied (as fit_default_method gives them to the method).
 [[nodiscard]] std::vector<estimation::OeWindow> corrected_pem_windows(const PlanarPrepared& prep,
                                                                      const std::vector<std::vector<Eigen::Vector2d>>* correction);

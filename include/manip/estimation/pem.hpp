@@ -52,6 +52,17 @@ struct PemSettings {
   // -Wmaybe-uninitialized for optionals of this struct inside aggregates.)
   bool hold_disturbance{false};
   DisturbanceModel fixed_disturbance{};
+  // Start the iteration at a neighbouring fit (the profile likelihood's next
+  // amplitude, a fold of the same session) instead of the generic arm: the
+  // same optimum in a third of the iterations (docs/benchmarks.md, Diagnosis).
+  bool warm_start{false};
+  // Stop when an accepted step lowers the NLL by less than this [nats] (plus
+  // 1e-9 relative). The tail converges linearly (Fisher information, not the
+  // Hessian), so the remaining gap is about this much again; 1e-3 nats is
+  // still far below the likelihood ratio's resolution (docs/diagnosis.md).
+  double tolerance_nats{1e-6};
+  Mat2 start_d_nspm{Mat2::Zero()}, start_k_npm{Mat2::Zero()};
+  DisturbanceModel start_disturbance{};
 };
 
 // Windows as for the output-error fit (make_oe_window with t_pre_s =
