@@ -542,13 +542,23 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
     Eigen::Matrix2d m_bsp = Eigen::Matrix2d::Zero();
     for (const auto& t : prep.data.planar) m_bsp += t.m_bsp;
     m_bsp /= static_cast<double>(prep.data.planar.size());
+    // The corrected D, K still hold the reflex (K = (1 + g) K_i, D = (1 + g)
+    // D_i − gτK_i), so in traces, with a = τ² tr K / 2 and b = τ tr D,
+    //   ΔM(g) = g (τ² K_i/2 − τ D_i) = g (a − b)/(1 + g) − 2 a g²/(1 + g)²,
+    // solved for g on (0, 3] by bisection (ΔM(g) falls with g for an arm).
     constexpr double tau = 0.030;
-    const Eigen::Matrix2d per_gain = tau * tau / 2 * c.corrected.k - tau * c.corrected.d;  // ΔM per unit reflex gain
+    const double ta = tau * tau / 2 * c.corrected.k.trace(), tb = tau * c.corrected.d.trace();
+    auto dm_of = [&](double g) { return g * (ta - tb) / (1 + g) - 2 * ta * g * g / ((1 + g) * (1 + g)); };
     auto add_alt = [&](const std::string& named, const Eigen::Matrix2d& dm) {
-      const double den = per_gain.trace();
-      if (!(den < 0) || !(dm.trace() < 0)) return;
-      const double g = dm.trace() / den;
-      if (!(g > 0 && g <= 3)) return;
+      const double target = dm.trace();
+      constexpr double g_max = 3.0;
+      if (!(target < 0) || !(dm_of(g_max) < target) || !(dm_of(1e-6) > target)) return;
+      double lo = 1e-6, hi = g_max;
+      for (int it = 0; it < 60; ++it) {
+        const double mid = 0.5 * (lo + hi);
+        (dm_of(mid) > target ? lo : hi) = mid;
+      }
+      const double g = 0.5 * (lo + hi);
       c.alternatives.push_back({named, "short_latency_reflex", g, tau,
                                 "within T_est a reflex g [D Δẋ(t - tau) + K Δx(t - tau)] acts as the inertia change g (tau² K/2 - tau D); "
                                 "this session cannot tell the two apart"});
