@@ -234,9 +234,8 @@ namespace {
 }  // namespace
 
 // The likelihood check end to end on a short session (50 movements, 3
-// held-out folds). Under ASan even this takes 7.5 min (every pem fit is
-// instrumented), so the sanitizer pass of scripts/test.sh skips it too; run
-// it there by hand: build-asan/tests/test_diagnosis "manipulandum: likelihood check on a short*".
+// held-out folds): the one manipulandum session the sanitizer pass of
+// scripts/test.sh runs (3.5 min under ASan, 2026-11-26).
 TEST_CASE("manipulandum: likelihood check on a short session names a 2 ms delay") {
   Case c;
   c.effects = {sim::parse_hidden_effect("delay:0.002")};
