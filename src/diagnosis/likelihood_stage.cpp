@@ -1,11 +1,11 @@
 #include "manip/diagnosis/likelihood_stage.hpp"
 
 #include <algorithm>
-#include <optional>
 #include <atomic>
 #include <chrono>
 #include <exception>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <cmath>
 #include <cstdio>
@@ -261,7 +261,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     std::vector<Profile> job_profiles(jobs.size());
     parallel_for(jobs.size(), [&](std::size_t j) {
       Cand c = cands[todo[jobs[j].first]];
-      set_shape(c, c.shapes[jobs[j].second]);
+      if (c.shapes.size() > 1) set_shape(c, c.shapes[jobs[j].second]);  // one shape: set once, above
       job_profiles[j] = profile(
           [&](double a) {
             const auto corr = add(acc, correction_of(c, a));

@@ -352,15 +352,17 @@ PemBaseline fit_default_method(const PlanarPrepared& prep, const std::vector<std
   apply_correction(pw, correction);
   estimation::SessionWindows sw;
   sw.info = &prep.info;
-  auto settings = prep.settings;
+  sw.settings = &prep.settings;
+  estimation::EstimatorSettings warm;  // a copy only when there is a start
   if (start && start->available && start->has_likelihood) {
-    settings.pem.warm_start = true;
-    settings.pem.start_d_nspm = start->d;
-    settings.pem.start_k_npm = start->k;
-    settings.pem.start_disturbance = start->noise;
-    settings.pem.tolerance_nats = 1e-3;
+    warm = prep.settings;
+    warm.pem.warm_start = true;
+    warm.pem.start_d_nspm = start->d;
+    warm.pem.start_k_npm = start->k;
+    warm.pem.start_disturbance = start->noise;
+    warm.pem.tolerance_nats = 1e-3;
+    sw.settings = &warm;
   }
-  sw.settings = &settings;
   sw.variational = prep.vw;
   sw.m_bsp = prep.m_bsp;
   sw.output_error = oe;
@@ -784,7 +786,7 @@ class PlanarReflex final : public Mechanism {
     return "residual along D Δẋ + K Δx delayed by 20-60 ms; none in the first tau of the window, growing after";
   }
   std::string not_applicable(const Dataset& d) const override {
-    if (!d.is_planar()) return "manipulandum sessions only";
+    if (auto why = planar_only(d); !why.empty()) return why;
     if (d.planar_ref_k.isZero()) return "no baseline D, K to copy";
     return {};
   }
