@@ -105,8 +105,13 @@ void parallel_for(std::size_t n, const std::function<void(std::size_t)>& f) {
 // per fold both models are fitted on the other trials (the candidate's
 // amplitude profiled there) and scored by the likelihood of the held-out
 // trials at those fits.
-void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc, const PemBaseline& start,
-                   const std::function<Correction(double)>& corr_m, LikelihoodCandidate& lc, int& evaluations) {
+// fit_at(α, trials, start): the default method with the accepted corrections
+// and the candidate's at amplitude α; corr_at(α, fit): the candidate's
+// correction at α as that fit has it.
+using FitAt = std::function<PemBaseline(double, const std::vector<std::size_t>*, const PemBaseline&)>;
+using CorrAt = std::function<Correction(double, const PemBaseline&)>;
+void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc, const PemBaseline& start, const FitAt& fit_at,
+                   const CorrAt& corr_at, int fits_per_eval, LikelihoodCandidate& lc, int& evaluations) {
   const std::size_t n = prep.pw.size();
   if (folds < 3 || n < static_cast<std::size_t>(folds)) return;
   std::vector<double> gain(static_cast<std::size_t>(folds), std::numeric_limits<double>::quiet_NaN());
@@ -116,13 +121,8 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
     std::vector<std::size_t> train, test;
     for (std::size_t i = 0; i < n; ++i) (static_cast<int>(i * static_cast<std::size_t>(folds) / n) == k ? test : train).push_back(i);
     const PemBaseline base = fit_default_method(prep, acc.empty() ? nullptr : &acc, &train, &start);
-    const auto pr = profile(
-        [&](double a) {
-          const auto c = add(acc, corr_m(a));
-          return fit_default_method(prep, &c, &train, &base);
-        },
-        base);
-    evals[ku] = 1 + pr.evaluations;
+    const auto pr = profile([&](double a) { return fit_at(a, &train, base); }, base);
+    evals[ku] = 1 + fits_per_eval * pr.evaluations;
     if (!base.has_likelihood || !pr.fit.has_likelihood) return;
     auto test_nll = [&](const Correction* c, const PemBaseline& f) {
       const auto all = corrected_pem_windows(prep, c);
@@ -133,7 +133,7 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
       for (const double x : v) t += x;
       return t;
     };
-    const auto c_ext = add(acc, corr_m(pr.alpha));
+    const auto c_ext = add(acc, corr_at(pr.alpha, pr.fit));
     const double before = test_nll(acc.empty() ? nullptr : &acc, base);
     const double after = test_nll(&c_ext, pr.fit);
     gain[ku] = (before - after) / static_cast<double>(test.size());
@@ -194,6 +194,9 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     // > 0: the direction is this fixed gain, not the equation-error one
     // (correction at α = extension_correction at α × unit_scale).
     double fixed_gain = 0.0, unit_scale = 1.0;
+    // The correction is simulated from the model at the fit's D, K
+    // (Mechanism::model_correction), not built from the data's columns.
+    bool model_based = false;
   };
   std::vector<Cand> cands;
   for (const auto& c : dg.rounds.front().candidates) {
@@ -203,17 +206,12 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       if (l->id() == c.id) m = l.get();
     if (!m) continue;
     Cand k{m, c.setting, {}};
-    // The reflex's delay: the equation-error pick is noise at realistic gains
-    // (its detection limit there is above the intrinsic impedance), so the
-    // likelihood profiles a coarse delay grid inside the search range too.
-    // Its direction is fixed too (gain_apparent 0.25 per unit α: α in [−2, 3]
-    // spans the physiological range), since a noisy equation-error gain
-    // would put a real reflex outside the profile's range of α.
-    if (c.id == "short_latency_reflex") {
-      k.shapes = {{0.025}, {0.030}, {0.035}, {0.040}, {0.050}};
-      k.fixed_gain = 0.25;
-    }
+    const auto plan = m->likelihood_plan(d);
+    k.shapes = plan.shapes;
+    k.fixed_gain = plan.gain_per_unit;
     if (k.shapes.empty()) k.shapes = {c.setting};
+    const std::vector<double> zero_gains(m->gains().size(), 0.0);
+    k.model_based = !m->model_correction(d, c.setting, zero_gains, prep.pem.d, prep.pem.k).empty();
     cands.push_back(std::move(k));
   }
   auto gains_at = [&](const Cand& c, const std::vector<double>& setting) {
@@ -227,19 +225,44 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
   // direction (then α is rescaled to it).
   auto set_shape = [&](Cand& c, const std::vector<double>& setting) {
     c.setting = setting;
-    c.gains_ee = gains_at(c, setting);
     c.unit_scale = 1.0;
+    if (c.model_based && c.fixed_gain > 0) {  // no equation-error fit needed
+      c.gains_ee = {c.fixed_gain};
+      return;
+    }
+    c.gains_ee = gains_at(c, setting);
     if (c.fixed_gain > 0 && c.gains_ee.size() == 1 && std::fabs(c.gains_ee[0]) > 1e-12) {
       c.unit_scale = c.fixed_gain / c.gains_ee[0];
       c.gains_ee[0] = c.fixed_gain;
     }
   };
   for (auto& c : cands) set_shape(c, c.setting);
-  auto correction_of = [&](const Cand& c, double a) {
+  // The candidate's correction at amplitude α; a model-based one at the D, K of `at`.
+  auto correction_of = [&](const Cand& c, double a, const PemBaseline& at) {
+    if (c.model_based) {
+      std::vector<double> g = c.gains_ee;
+      for (auto& x : g) x *= a;
+      return c.mech->model_correction(d, c.setting, g, at.d, at.k);
+    }
     Diagnosis one;
     one.accepted = {c.mech->id()};
     one.accepted_settings = {c.setting};
     return extension_correction(d, one, lib, a * c.unit_scale);
+  };
+  // The default method with the accepted corrections and the candidate's at
+  // α. A model-based correction depends on the D, K it is simulated at: two
+  // passes (at the start's D, K, then at the first fit's): measured on a
+  // hidden 3 ms lag from the uncorrected fit, the second pass moves the LR
+  // by up to 7, a third by ≤ 0.2 (docs/diagnosis.md, "Model-based corrections").
+  auto fit_at = [&](const Cand& c, double a, const Correction& acc_in, const std::vector<std::size_t>* trials, const PemBaseline& start) {
+    PemBaseline f = start;
+    for (int pass = 0; pass < (c.model_based ? 2 : 1); ++pass) {
+      const auto corr = add(acc_in, correction_of(c, a, f));
+      auto next = fit_default_method(prep, &corr, trials, &f);
+      if (!next.available || !next.has_likelihood) return next;
+      f = std::move(next);
+    }
+    return f;
   };
 
   st.available = true;
@@ -262,18 +285,13 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     parallel_for(jobs.size(), [&](std::size_t j) {
       Cand c = cands[todo[jobs[j].first]];
       if (c.shapes.size() > 1) set_shape(c, c.shapes[jobs[j].second]);  // one shape: set once, above
-      job_profiles[j] = profile(
-          [&](double a) {
-            const auto corr = add(acc, correction_of(c, a));
-            return fit_default_method(prep, &corr, nullptr, &cur);
-          },
-          cur);
+      job_profiles[j] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur);
     });
     std::vector<Profile> profiles(todo.size());
     std::vector<int> best_job(todo.size(), -1);
     for (std::size_t j = 0; j < jobs.size(); ++j) {
       const auto t = jobs[j].first;
-      st.evaluations += job_profiles[j].evaluations;
+      st.evaluations += (cands[todo[t]].model_based ? 2 : 1) * job_profiles[j].evaluations;
       if (best_job[t] < 0 || nll_of(job_profiles[j].fit) < nll_of(profiles[t].fit)) {
         best_job[t] = static_cast<int>(j);
         profiles[t] = job_profiles[j];
@@ -362,7 +380,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     const auto ci = idx[static_cast<std::size_t>(win)];
     if (folds > 0) {
       if (progress) progress("likelihood check: held-out trials for " + w.id + " (" + std::to_string(folds) + " folds)");
-      heldout_check(prep, folds, acc, cur, [&](double a) { return correction_of(cands[ci], a); }, w, st.evaluations);
+      const auto& cw = cands[ci];
+      heldout_check(
+          prep, folds, acc, cur,
+          [&](double a, const std::vector<std::size_t>* trials, const PemBaseline& start) { return fit_at(cw, a, acc, trials, start); },
+          [&](double a, const PemBaseline& f) { return correction_of(cw, a, f); }, cw.model_based ? 2 : 1, w, st.evaluations);
       if (round > 0 && w.heldout_done && !(w.heldout.p_value < alpha)) {
         w.heldout_rejected = true;
         rd.accepted = -1;
@@ -372,7 +394,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       }
     }
     used[ci] = true;
-    acc = add(acc, correction_of(cands[ci], w.alpha));
+    acc = add(acc, correction_of(cands[ci], w.alpha, w.fit));
     cur = w.fit;
     st.accepted.push_back(w.id);
     st.accepted_fits.push_back(w);

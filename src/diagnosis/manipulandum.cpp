@@ -66,6 +66,11 @@ class Projected final : public Mechanism {
   std::vector<std::vector<double>> grid(const Dataset& d) const override { return inner_->grid(d); }
   std::size_t history_samples(const Dataset& d) const override { return inner_->history_samples(d); }
   int main_param() const override { return inner_->main_param(); }
+  LikelihoodPlan likelihood_plan(const Dataset& d) const override { return inner_->likelihood_plan(d); }
+  std::vector<std::vector<Eigen::Vector2d>> model_correction(const Dataset& d, std::span<const double> s, std::span<const double> g,
+                                                             const Eigen::Matrix2d& dm, const Eigen::Matrix2d& km) const override {
+    return inner_->model_correction(d, s, g, dm, km);
+  }
   Columns columns(const Dataset& d, std::span<const double> s) const override {
     auto c = inner_->columns(d, s);
     if (order_ < 0 || c.empty()) return c;
@@ -225,6 +230,9 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
       p.log = ses.name;
       p.angle_rad = t.angle_rad;
       p.ws_to_sh = rot;
+      p.m_adm = ses.info.m_adm_shoulder_kg();
+      p.d_adm = ses.info.d_adm_shoulder_nspm();
+      p.m_handle = ses.info.m_handle_shoulder_kg();
       try {
         if (t.onset_index < 0) throw std::invalid_argument("no onset");
         const auto on = static_cast<std::size_t>(t.onset_index);
@@ -538,6 +546,82 @@ std::vector<std::vector<Vector2d>> extension_correction(const Dataset& d, const 
   return out;
 }
 
+std::vector<std::vector<Vector2d>> simulate_extension(const Dataset& d, const Matrix2d& d_nspm, const Matrix2d& k_npm,
+                                                      const std::function<LinearExtension(const PlanarTrial&)>& extension) {
+  constexpr int kSub = 8;
+  const double h = d.dt_s / kSub;
+  std::vector<std::vector<Vector2d>> out(d.planar.size());
+  std::vector<Vector2d> hx, hv;  // state at every step start (delayed terms)
+  for (std::size_t i = 0; i < d.planar.size(); ++i) {
+    const auto& p = d.planar[i];
+    const std::size_t n = p.u_pert.size();
+    out[i].assign(n, Vector2d::Zero());
+    const LinearExtension e = extension(p);
+    const Matrix2d m_tot = p.m_adm + p.m_handle + p.m_bsp;
+    const Matrix2d m_person = p.m_bsp + p.m_handle + e.mass_kg;
+    const bool lag = e.sensor_lag_s > 0;
+    const Matrix2d m_sys = lag ? p.m_adm : Matrix2d(m_tot + e.mass_kg);
+    const Eigen::SelfAdjointEigenSolver<Matrix2d> es(0.5 * (m_sys + m_sys.transpose()));
+    if (!(es.eigenvalues().minCoeff() > 1e-3) || !std::isfinite(e.sensor_lag_s) || !(d.dt_s > 0)) continue;
+    const Matrix2d m_sys_inv = m_sys.inverse();
+    const bool delayed = !e.damping_delayed_nspm.isZero() || !e.stiffness_delayed_npm.isZero();
+    const long lag_steps = delayed ? std::max(1L, std::lround(e.delay_s / d.dt_s)) * kSub : 0;
+    hx.assign(n * kSub + 1, Vector2d::Zero());
+    hv = hx;
+    // Delayed state at step index `at` (fractional; zero before onset).
+    auto past = [&](double at, Vector2d& xd, Vector2d& vd) {
+      xd.setZero();
+      vd.setZero();
+      if (!delayed || at < 0) return;
+      const auto j = static_cast<std::size_t>(at);
+      const double w = at - static_cast<double>(j);
+      const std::size_t j1 = std::min(j + 1, hx.size() - 1);
+      xd = (1 - w) * hx[j] + w * hx[j1];
+      vd = (1 - w) * hv[j] + w * hv[j1];
+    };
+    Vector2d x = Vector2d::Zero(), v = Vector2d::Zero(), f = Vector2d::Zero();
+    for (std::size_t k = 0; k < n; ++k) {
+      const Vector2d u = p.u_pert[k];
+      // Derivatives at a state (a, ḟ_r) and the baseline's residual there.
+      auto deriv = [&](const Vector2d& x0, const Vector2d& v0, const Vector2d& f0, double at, Vector2d& a, Vector2d& df) {
+        Vector2d xd, vd;
+        past(at, xd, vd);
+        const Vector2d rest = (d_nspm + e.damping_nspm) * v0 + (k_npm + e.stiffness_npm) * x0 + e.damping_delayed_nspm * vd +
+                              e.stiffness_delayed_npm * xd;
+        if (lag) {
+          a = m_sys_inv * (f0 + u - p.d_adm * v0);
+          df = (-m_person * a - rest - f0) / e.sensor_lag_s;
+        } else {
+          a = m_sys_inv * (u - p.d_adm * v0 - rest);
+          df.setZero();
+        }
+        return Vector2d(u - m_tot * a - (d_nspm + p.d_adm) * v0 - k_npm * x0);
+      };
+      Vector2d mean = Vector2d::Zero();
+      for (int j = 0; j < kSub; ++j) {
+        const std::size_t m = k * kSub + static_cast<std::size_t>(j);
+        hx[m] = x;
+        hv[m] = v;
+        const double at = static_cast<double>(m) - static_cast<double>(lag_steps);
+        Vector2d a1, f1, a2, f2, a3, f3, a4, f4;
+        const Vector2d c1 = deriv(x, v, f, at, a1, f1);
+        const Vector2d x2 = v + 0.5 * h * a1;
+        const Vector2d c2 = deriv(x + 0.5 * h * v, x2, f + 0.5 * h * f1, at + 0.5, a2, f2);
+        const Vector2d x3 = v + 0.5 * h * a2;
+        const Vector2d c3 = deriv(x + 0.5 * h * x2, x3, f + 0.5 * h * f2, at + 0.5, a3, f3);
+        const Vector2d x4 = v + h * a3;
+        const Vector2d c4 = deriv(x + h * x3, x4, f + h * f3, at + 1.0, a4, f4);
+        mean += (c1 + 2 * c2 + 2 * c3 + c4) / 6.0;  // Simpson over the step
+        x += h / 6 * (v + 2 * x2 + 2 * x3 + x4);
+        v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4);
+        f += h / 6 * (f1 + 2 * f2 + 2 * f3 + f4);
+      }
+      out[i][k] = mean / kSub;
+    }
+  }
+  return out;
+}
+
 // ---------------------------------------------------------------- mechanisms
 namespace {
 
@@ -572,6 +656,13 @@ class Curl final : public Mechanism {
   // tens of N/m): +-300 N/m.
   std::vector<ParamInfo> gains() const override { return {{"curl_c", "N/m", -300.0, 300.0}}; }
   int main_param() const override { return 0; }
+  std::vector<std::vector<Vector2d>> model_correction(const Dataset& d, std::span<const double>, std::span<const double> g,
+                                                      const Matrix2d& dm, const Matrix2d& km) const override {
+    LinearExtension e;
+    const double c = g.empty() ? 0.0 : g[0];
+    e.stiffness_npm << 0.0, c, -c, 0.0;
+    return simulate_extension(d, dm, km, [&](const PlanarTrial&) { return e; });
+  }
   Columns columns(const Dataset& d, std::span<const double>) const override {
     return planar_columns(d, 1, [](const PlanarTrial& p, int a, std::size_t k, auto& c, std::size_t i) {
       c[0][i] = a == 0 ? p.dx[k](1) : -p.dx[k](0);
@@ -737,6 +828,12 @@ class HandleMass final : public Mechanism {
   std::string not_applicable(const Dataset& d) const override { return planar_only(d); }
   std::vector<ParamInfo> gains() const override { return {{"handle_extra", "kg", -1.0, 1.0}}; }
   int main_param() const override { return 0; }
+  std::vector<std::vector<Vector2d>> model_correction(const Dataset& d, std::span<const double>, std::span<const double> g,
+                                                      const Matrix2d& dm, const Matrix2d& km) const override {
+    LinearExtension e;
+    e.mass_kg = (g.empty() ? 0.0 : g[0]) * Matrix2d::Identity();
+    return simulate_extension(d, dm, km, [&](const PlanarTrial&) { return e; });
+  }
   Columns columns(const Dataset& d, std::span<const double>) const override {
     return planar_columns(d, 1, [](const PlanarTrial& p, int a, std::size_t k, auto& c, std::size_t i) {
       c[0][i] = p.dxdd[k](a);
@@ -755,6 +852,14 @@ class WrongMbsp final : public Mechanism {
   // Regression tables predict segment masses and inertias to ~10-30 % of a person's.
   std::vector<ParamInfo> gains() const override { return {{"mbsp_error", "1", -0.5, 0.5}}; }
   int main_param() const override { return 0; }
+  std::vector<std::vector<Vector2d>> model_correction(const Dataset& d, std::span<const double>, std::span<const double> g,
+                                                      const Matrix2d& dm, const Matrix2d& km) const override {
+    return simulate_extension(d, dm, km, [&](const PlanarTrial& p) {
+      LinearExtension e;
+      e.mass_kg = (g.empty() ? 0.0 : g[0]) * p.m_bsp;
+      return e;
+    });
+  }
   Columns columns(const Dataset& d, std::span<const double>) const override {
     return planar_columns(d, 1, [](const PlanarTrial& p, int a, std::size_t k, auto& c, std::size_t i) {
       c[0][i] = (p.m_bsp * p.dxdd[k])(a);
@@ -800,6 +905,21 @@ class PlanarReflex final : public Mechanism {
   std::vector<ParamInfo> shape_params() const override { return {{"delay", "s", kLo, kHi}}; }
   std::vector<ParamInfo> gains() const override { return {{"gain_apparent", "1", -0.2, 0.6}}; }
   int main_param() const override { return 0; }
+  // The equation-error delay and gain are noise at realistic gains (its
+  // detection limit there is above the intrinsic impedance), so the
+  // likelihood profiles a coarse delay grid inside the search range, along a
+  // fixed direction: gain_apparent 0.25 per unit amplitude (the profile's
+  // [−2, 3] spans the physiological range).
+  LikelihoodPlan likelihood_plan(const Dataset&) const override { return {{{0.025}, {0.030}, {0.035}, {0.040}, {0.050}}, 0.25}; }
+  std::vector<std::vector<Vector2d>> model_correction(const Dataset& d, std::span<const double> s, std::span<const double> g,
+                                                      const Matrix2d& dm, const Matrix2d& km) const override {
+    LinearExtension e;
+    const double gain = g.empty() ? 0.0 : g[0];
+    e.damping_delayed_nspm = gain * d.planar_ref_d;
+    e.stiffness_delayed_npm = gain * d.planar_ref_k;
+    e.delay_s = s.empty() ? 0.03 : s[0];
+    return simulate_extension(d, dm, km, [&](const PlanarTrial&) { return e; });
+  }
   std::vector<std::vector<double>> grid(const Dataset& d) const override {
     std::vector<std::vector<double>> g;
     const auto step = std::max<long>(1, std::lround(0.001 / d.dt_s));

@@ -5,6 +5,7 @@
 // truth for the checks comes from the generator.
 #include <cmath>
 #include <cstdlib>
+#include <numbers>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -86,6 +87,26 @@ inline Outcome run_case(const Case& c) {
   o.lk = std::move(run.lk);
   o.concl = std::move(run.concl);
   return o;
+}
+
+// One planar trial at 4 kHz for the model-based corrections' checks: the
+// paper's admittance (5 kg, 15 N s/m), a 0.25 kg handle, an anisotropic
+// M_BSP and a smooth 150 ms pulse on both axes, 601 samples from onset.
+inline Dataset one_pulse_trial() {
+  Dataset d;
+  d.dt_s = 0.00025;
+  PlanarTrial p;
+  p.m_adm = 5.0 * Matrix2d::Identity();
+  p.d_adm = 15.0 * Matrix2d::Identity();
+  p.m_handle = 0.25 * Matrix2d::Identity();
+  p.m_bsp << 1.8, 0.3, 0.3, 1.2;
+  for (std::size_t k = 0; k < 601; ++k) {
+    const double t = static_cast<double>(k) * d.dt_s;
+    const double s = t < 0.15 ? std::sin(std::numbers::pi * t / 0.15) : 0.0;
+    p.u_pert.emplace_back(15.0 * s * s, -6.0 * s * s * s);
+  }
+  d.planar.push_back(p);
+  return d;
 }
 
 inline double rel(double est, double truth) { return (est - truth) / std::fabs(truth); }

@@ -21,6 +21,7 @@
 #include "manip/dsp/integrate.hpp"
 #include "manip/dsp/savgol.hpp"
 #include "manip/dsp/sosfilt.hpp"
+#include "manip/estimation/output_error.hpp"
 #include "manip/sim/hidden_effects.hpp"
 #include "manip/sim/presets.hpp"
 
@@ -294,33 +295,142 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 K is named, delay withi
 }
 
 // What the session does show of a reflex (docs/diagnosis.md, "The
-// short-latency reflex in a 150 ms window"): an inertia reduction, named,
-// with the reflex of the equivalent gain offered next to it.
-TEST_CASE("manipulandum: hidden short-latency reflex 0.5 K -> an inertia reduction, the reflex named as its alternative, gain within a factor 2") {
+// short-latency reflex in a 150 ms window"): with the corrections simulated
+// from the model, the reflex itself is significant, its gain on a ridge with
+// D, K (seed 1: LR 13.2, p_holm 0.01, gain_apparent at the edge of the
+// profile, so not named); nothing else is named in its place. When an
+// inertia reduction is named instead, the reflex of the equivalent gain is
+// offered next to it (checked here when it happens; the arithmetic below).
+TEST_CASE("manipulandum: hidden short-latency reflex 0.5 K -> the reflex significant, nothing else named in its place") {
   Case c;
   c.effects = {sim::parse_hidden_effect("reflex:0.5")};
   const auto o = run_case(c);
   INFO("named: " << (o.concl.named.empty() ? "none" : o.concl.named.front()) << ", " << o.concl.alternatives.size() << " alternatives");
-  REQUIRE_FALSE(o.concl.named.empty());
-  const auto& n = o.concl.named.front();
-  CHECK((n == "wrong_segment_inertia" || n == "handle_mass" || n == "short_latency_reflex"));
-  bool found = false;
+  for (const auto& n : o.concl.named) CHECK((n == "wrong_segment_inertia" || n == "handle_mass" || n == "short_latency_reflex"));
+  REQUIRE(o.lk.available);
+  REQUIRE_FALSE(o.lk.rounds.empty());
+  const LikelihoodCandidate* reflex = nullptr;
+  for (const auto& lc : o.lk.rounds.front().candidates)
+    if (lc.id == "short_latency_reflex") reflex = &lc;
+  REQUIRE(reflex);
+  INFO("reflex LR " << reflex->lr << ", p_holm " << reflex->p_holm);
+  CHECK(reflex->significant);
   for (const auto& a : o.concl.alternatives)
     if (a.id == "short_latency_reflex") {
-      // Within a factor of 2: the inertia change is a small second-order
-      // signal and the delay is taken mid-range (the study's spread).
       INFO("equivalent reflex gain " << a.gain << " (hidden 0.5)");
       CHECK(a.gain > 0.25);
       CHECK(a.gain < 1.0);
-      found = true;
     }
-  CHECK((found || n == "short_latency_reflex"));
+}
+
+// The conclusion's alternative to a named inertia reduction: the reflex gain
+// g whose second-order inertia g (τ² K_i/2 − τ D_i) equals the named ΔM, with
+// the intrinsic D_i, K_i recovered from the corrected (reflex-holding) D, K:
+// K = (1 + g) K_i, D = (1 + g) D_i − g τ K_i (docs/diagnosis.md). Checked by
+// putting the reported g back into these definitions.
+TEST_CASE("manipulandum: the reflex offered for a named inertia reduction has the gain of the same inertia change") {
+  PlanarPrepared prep;
+  PlanarTrial t;
+  t.m_bsp << 1.8, 0.3, 0.3, 1.2;
+  prep.data.planar = {t, t};
+  LikelihoodStage st;
+  st.available = true;
+  st.fit.available = true;
+  st.fit.d << 14.0, -4.0, -4.0, 9.0;
+  st.fit.k << 200.0, -80.0, -80.0, 420.0;
+  LikelihoodCandidate lc;
+  lc.id = "wrong_segment_inertia";
+  lc.params.push_back({"mbsp_error", "1", {-0.05, -0.05, -0.05}, -0.5, 0.5, true});
+  st.accepted = {lc.id};
+  st.accepted_fits = {lc};
+  const auto concl = conclude(Diagnosis{}, st, prep);
+  REQUIRE(concl.alternatives.size() == 1);
+  const auto& a = concl.alternatives.front();
+  CHECK(a.named == "wrong_segment_inertia");
+  CHECK(a.id == "short_latency_reflex");
+  const double g = a.gain, tau = a.delay_s;
+  REQUIRE(g > 0);
+  const Matrix2d ki = st.fit.k / (1 + g), di = (st.fit.d + g * tau * ki) / (1 + g);
+  const double dm = g * (tau * tau / 2 * ki.trace() - tau * di.trace());
+  CHECK(dm == Approx(-0.05 * t.m_bsp.trace()).epsilon(1e-6));
+  // No inertia reduction, no alternative.
+  st.accepted_fits.front().params.front().est = {0.05, 0.05, 0.05};
+  CHECK(conclude(Diagnosis{}, st, prep).alternatives.empty());
 }
 
 TEST_CASE("manipulandum: hidden curl 40 N/m is named, c within 20 %", "[.known-miss]") {
   Case c;
   c.effects = {sim::parse_hidden_effect("curl:40")};
   check_named(c, run_case(c));
+}
+
+TEST_CASE("manipulandum: model-based corrections drive the baseline model along the extended plant's response") {
+  // The correction e of a linear mechanism (simulate_extension: RK4 on the
+  // extended plant) must make the baseline variational model reproduce the
+  // extended plant: given u − e, the baseline's exact zero-order-hold
+  // response (estimation::discretise_variational, matrix exponential, an
+  // independent path) must feel the mechanism's force e along itself:
+  //   handle ΔM Δẍ, M_BSP error s M_BSP Δẍ, curl [0 c; −c 0] Δx,
+  //   reflex g (D̂ Δẋ + K̂ Δx)(t − τ),
+  // averaged over each hold (Δẍ: Δv over the hold / h; the others: the
+  // trapezoid, whose O(h²) error bounds the tolerance).
+  Dataset d = one_pulse_trial();
+  d.planar_ref_d << 14.0, -4.0, -4.0, 9.0;
+  d.planar_ref_k << 170.0, -70.0, -70.0, 380.0;
+  const PlanarTrial& p = d.planar.front();
+  const std::size_t n = p.u_pert.size();
+  Matrix2d dm, km;
+  dm << 12.0, -3.0, -3.0, 8.0;
+  km << 150.0, -60.0, -60.0, 340.0;
+  estimation::OeWindow w;
+  w.fs_hz = 1.0 / d.dt_s;
+  w.m_total_kg = p.m_adm + p.m_handle + p.m_bsp;
+  w.m_bsp_kg = p.m_bsp;
+  w.d_adm_nspm = p.d_adm;
+  const auto zoh = estimation::discretise_variational(w, dm, km);
+  const auto lib = planar_library();
+  struct Probe {
+    std::string id;
+    double gain;
+    std::function<Eigen::Vector2d(const std::vector<Eigen::Vector4d>&, std::size_t)> force;  // hold mean over [k, k+1]
+  };
+  const Matrix2d curl = (Matrix2d() << 0.0, 40.0, -40.0, 0.0).finished();
+  const std::size_t lag = 120;  // 30 ms
+  auto at = [](const std::vector<Eigen::Vector4d>& z, std::size_t k, const Matrix2d& dd, const Matrix2d& kk) -> Eigen::Vector2d {
+    return dd * z[k].tail<2>() + kk * z[k].head<2>();
+  };
+  const std::vector<Probe> probes = {
+      {"handle_mass", 0.3, [&](const auto& z, std::size_t k) { return Eigen::Vector2d(0.3 * (z[k + 1].template tail<2>() - z[k].template tail<2>()) / d.dt_s); }},
+      {"wrong_segment_inertia", -0.2,
+       [&](const auto& z, std::size_t k) { return Eigen::Vector2d(-0.2 * p.m_bsp * (z[k + 1].template tail<2>() - z[k].template tail<2>()) / d.dt_s); }},
+      {"curl_stiffness", 40.0, [&](const auto& z, std::size_t k) { return Eigen::Vector2d(0.5 * curl * (z[k].template head<2>() + z[k + 1].template head<2>())); }},
+      {"short_latency_reflex", 0.4,
+       [&](const auto& z, std::size_t k) {
+         if (k < lag) return Eigen::Vector2d(Eigen::Vector2d::Zero());
+         return Eigen::Vector2d(0.4 * 0.5 * (at(z, k - lag, d.planar_ref_d, d.planar_ref_k) + at(z, k + 1 - lag, d.planar_ref_d, d.planar_ref_k)));
+       }},
+  };
+  for (const auto& pr : probes) {
+    const Mechanism* m = nullptr;
+    for (const auto& x : lib)
+      if (x->id() == pr.id) m = x.get();
+    REQUIRE(m);
+    const std::vector<double> setting{0.030}, g{pr.gain};
+    const auto e = m->model_correction(d, setting, g, dm, km);
+    REQUIRE(e.size() == 1);
+    REQUIRE(e[0].size() == n);
+    std::vector<Eigen::Vector4d> z(n, Eigen::Vector4d::Zero());
+    for (std::size_t k = 0; k + 1 < n; ++k) z[k + 1] = zoh.phi * z[k] + zoh.gam * (p.u_pert[k] - e[0][k]);
+    double worst = 0.0, peak = 0.0;
+    for (std::size_t k = 0; k + 1 < n; ++k) {
+      const Eigen::Vector2d f = pr.force(z, k);
+      worst = std::max(worst, (e[0][k] - f).norm());
+      peak = std::max(peak, f.norm());
+    }
+    INFO(pr.id << ": largest difference " << worst << " N, peak force " << peak << " N");
+    CHECK(peak > 0.05);
+    CHECK(worst < 1e-5 * peak);  // measured 5e-9 (inertias) to 1e-6 (curl) of the peak
+  }
 }
 
 // ---------------------------------------------------------------- study (not in CI)

@@ -29,6 +29,9 @@ struct PlanarTrial {
   double angle_rad = 0.0;
   Eigen::Matrix2d m_bsp = Eigen::Matrix2d::Zero();     // eq. 16 at onset (fixed, as in the estimator)
   Eigen::Matrix2d ws_to_sh = Eigen::Matrix2d::Identity();  // workspace -> shoulder rotation
+  // The session's configured admittance and handle mass, shoulder frame
+  // (eq. 19-21; for mechanisms that simulate the apparatus).
+  Eigen::Matrix2d m_adm = Eigen::Matrix2d::Zero(), d_adm = Eigen::Matrix2d::Zero(), m_handle = Eigen::Matrix2d::Zero();
   std::vector<Eigen::Vector2d> dx, dxd, dxdd;          // Δx, Δẋ, Δẍ (high-pass isolated)
   std::vector<Eigen::Vector2d> du_ext_adm;             // eq. 21
   std::vector<Eigen::Vector2d> du_ext_force;           // from the force sensor

@@ -15,9 +15,14 @@
 //
 // Each candidate m is a one-parameter family of corrections of the
 // perturbation force, u_pert − C_acc − α C_m, where C_m is the mechanism's
-// correction with its equation-error gains and shape (extension_correction)
-// and C_acc the already accepted ones at their fitted amplitudes; D, K and
-// the noise model are re-fitted at every α (profile likelihood). The
+// correction with its equation-error gains and shape (extension_correction),
+// or with the direction and shapes the mechanism sets itself
+// (Mechanism::likelihood_plan), simulated from the model at the fit's D, K
+// when the mechanism is linear in the variational state
+// (Mechanism::model_correction: free of the noise that columns built from
+// the isolated signals carry into the input), and C_acc the already
+// accepted ones at their fitted amplitudes; D, K and the noise model are
+// re-fitted at every α (profile likelihood). The
 // likelihood ratio LR = 2 (NLL(0) − min_α NLL(α)) is referred to χ² with as
 // many degrees of freedom as the candidate's equation-error parameters
 // (shape + gains: the direction C_m was itself fitted to these data), so a

@@ -232,6 +232,28 @@ struct PlanarReport {
 // longer the last edge grows).
 [[nodiscard]] std::vector<double> default_window_edges(double t_est_s);
 
+// A linear extension of the variational model (eq. 19-21 + eq. 9) as the
+// true plant of a model-based correction (Mechanism::model_correction): the
+// person's force on the handle gets
+//   −(ΔM Δẍ + ΔD Δẋ + ΔK Δx + ΔD_τ Δẋ(t − τ) + ΔK_τ Δx(t − τ)),
+// and with sensor_lag_s > 0 the admittance renders from a first-order
+// lagged reading f_r of the force the sensor bears (τ_s ḟ_r = f_s − f_r).
+struct LinearExtension {
+  Eigen::Matrix2d mass_kg = Eigen::Matrix2d::Zero(), damping_nspm = Eigen::Matrix2d::Zero(), stiffness_npm = Eigen::Matrix2d::Zero();
+  Eigen::Matrix2d damping_delayed_nspm = Eigen::Matrix2d::Zero(), stiffness_delayed_npm = Eigen::Matrix2d::Zero();
+  double delay_s = 0.0;  // of the delayed terms (≥ one sample when they are used)
+  double sensor_lag_s = 0.0;
+};
+// The correction of u_pert that makes the baseline variational model
+// (M_BSP + M_adm + M_handle, D + D_adm, K) reproduce the extended plant's
+// response to u_pert from rest at onset: e = u − M_tot Δẍ − (D + D_adm) Δẋ − K Δx
+// along the simulated response, averaged over each sample's hold (RK4, 8
+// steps per sample), per planar trial. A trial whose extended inertia is not
+// positive definite gets no correction (outside every mechanism's bounds).
+[[nodiscard]] std::vector<std::vector<Eigen::Vector2d>> simulate_extension(
+    const Dataset& d, const Eigen::Matrix2d& d_nspm, const Eigen::Matrix2d& k_npm,
+    const std::function<LinearExtension(const PlanarTrial&)>& extension);
+
 // Force-sensor lag (src/diagnosis/planar_sensor.cpp; docs/diagnosis.md,
 // "Force-sensor mechanisms"): column d/dt (u_pert − Δu_ext(21) − M_handle Δẍ) − u̇_pert
 // = d/dt Δf_r (the reading's variation), gain tau [s]. The dataset does not

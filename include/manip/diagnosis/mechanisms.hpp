@@ -41,6 +41,31 @@ class Mechanism {
   [[nodiscard]] virtual std::size_t history_samples(const Dataset&) const { return 0; }
   // Index into [shape params..., gains...] of the parameter the tests check.
   [[nodiscard]] virtual int main_param() const = 0;
+
+  // How the likelihood check (likelihood_stage.hpp) profiles the mechanism:
+  // the shapes it tries itself (empty: the equation-error search's pick) and
+  // a fixed direction for a one-gain mechanism (gain per unit of the
+  // profiled amplitude; 0: the equation-error gain). A fixed direction and
+  // shapes of its own are for mechanisms whose equation-error estimate is
+  // noise at realistic magnitudes (the reflex's delay and gain).
+  struct LikelihoodPlan {
+    std::vector<std::vector<double>> shapes;
+    double gain_per_unit = 0.0;
+  };
+  [[nodiscard]] virtual LikelihoodPlan likelihood_plan(const Dataset&) const { return {}; }
+  // A correction of the perturbation force (per planar trial, per sample of
+  // the window [onset, onset + T_est]; the input side of eq. 19-21, as
+  // extension_correction) simulated from the model at the person's D, K and
+  // the given shape and gains: free of the measurement and motor noise that
+  // columns built from the isolated signals carry into the input
+  // (manipulandum.hpp, simulate_extension). Empty: the mechanism has none
+  // (its columns × gains are used).
+  [[nodiscard]] virtual std::vector<std::vector<Eigen::Vector2d>> model_correction(const Dataset&, std::span<const double> /*setting*/,
+                                                                                 std::span<const double> /*gains*/,
+                                                                                 const Eigen::Matrix2d& /*d_nspm*/,
+                                                                                 const Eigen::Matrix2d& /*k_npm*/) const {
+    return {};
+  }
 };
 
 // Stretch reflex (Hammerstein: Kearney, Stein & Parameswaran 1997): half-wave
