@@ -254,9 +254,10 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
   // passes (at the start's D, K, then at the first fit's): measured on a
   // hidden 3 ms lag from the uncorrected fit, the second pass moves the LR
   // by up to 7, a third by ≤ 0.2 (docs/diagnosis.md, "Model-based corrections").
+  auto passes = [](const Cand& c) { return c.model_based ? 2 : 1; };  // `pem` fits per profile point
   auto fit_at = [&](const Cand& c, double a, const Correction& acc_in, const std::vector<std::size_t>* trials, const PemBaseline& start) {
     PemBaseline f = start;
-    for (int pass = 0; pass < (c.model_based ? 2 : 1); ++pass) {
+    for (int pass = 0; pass < passes(c); ++pass) {
       const auto corr = add(acc_in, correction_of(c, a, f));
       auto next = fit_default_method(prep, &corr, trials, &f);
       if (!next.available || !next.has_likelihood) return next;
@@ -291,7 +292,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     std::vector<int> best_job(todo.size(), -1);
     for (std::size_t j = 0; j < jobs.size(); ++j) {
       const auto t = jobs[j].first;
-      st.evaluations += (cands[todo[t]].model_based ? 2 : 1) * job_profiles[j].evaluations;
+      st.evaluations += passes(cands[todo[t]]) * job_profiles[j].evaluations;
       if (best_job[t] < 0 || nll_of(job_profiles[j].fit) < nll_of(profiles[t].fit)) {
         best_job[t] = static_cast<int>(j);
         profiles[t] = job_profiles[j];
@@ -384,7 +385,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       heldout_check(
           prep, folds, acc, cur,
           [&](double a, const std::vector<std::size_t>* trials, const PemBaseline& start) { return fit_at(cw, a, acc, trials, start); },
-          [&](double a, const PemBaseline& f) { return correction_of(cw, a, f); }, cw.model_based ? 2 : 1, w, st.evaluations);
+          [&](double a, const PemBaseline& f) { return correction_of(cw, a, f); }, passes(cw), w, st.evaluations);
       if (round > 0 && w.heldout_done && !(w.heldout.p_value < alpha)) {
         w.heldout_rejected = true;
         rd.accepted = -1;

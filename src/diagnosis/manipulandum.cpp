@@ -566,8 +566,10 @@ std::vector<std::vector<Vector2d>> simulate_extension(const Dataset& d, const Ma
     const Matrix2d m_sys_inv = m_sys.inverse();
     const bool delayed = !e.damping_delayed_nspm.isZero() || !e.stiffness_delayed_npm.isZero();
     const long lag_steps = delayed ? std::max(1L, std::lround(e.delay_s / d.dt_s)) * kSub : 0;
-    hx.assign(n * kSub + 1, Vector2d::Zero());
-    hv = hx;
+    if (delayed) {
+      hx.assign(n * kSub + 1, Vector2d::Zero());
+      hv = hx;
+    }
     // Delayed state at step index `at` (fractional; zero before onset).
     auto past = [&](double at, Vector2d& xd, Vector2d& vd) {
       xd.setZero();
@@ -586,7 +588,7 @@ std::vector<std::vector<Vector2d>> simulate_extension(const Dataset& d, const Ma
       auto deriv = [&](const Vector2d& x0, const Vector2d& v0, const Vector2d& f0, double at, Vector2d& a, Vector2d& df) {
         Vector2d xd, vd;
         past(at, xd, vd);
-        const Vector2d rest = (d_nspm + e.damping_nspm) * v0 + (k_npm + e.stiffness_npm) * x0 + e.damping_delayed_nspm * vd +
+        const Vector2d rest = d_nspm * v0 + (k_npm + e.stiffness_npm) * x0 + e.damping_delayed_nspm * vd +
                               e.stiffness_delayed_npm * xd;
         if (lag) {
           a = m_sys_inv * (f0 + u - p.d_adm * v0);
@@ -600,8 +602,10 @@ std::vector<std::vector<Vector2d>> simulate_extension(const Dataset& d, const Ma
       Vector2d mean = Vector2d::Zero();
       for (int j = 0; j < kSub; ++j) {
         const std::size_t m = k * kSub + static_cast<std::size_t>(j);
-        hx[m] = x;
-        hv[m] = v;
+        if (delayed) {
+          hx[m] = x;
+          hv[m] = v;
+        }
         const double at = static_cast<double>(m) - static_cast<double>(lag_steps);
         Vector2d a1, f1, a2, f2, a3, f3, a4, f4;
         const Vector2d c1 = deriv(x, v, f, at, a1, f1);

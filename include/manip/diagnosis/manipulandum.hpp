@@ -235,11 +235,11 @@ struct PlanarReport {
 // A linear extension of the variational model (eq. 19-21 + eq. 9) as the
 // true plant of a model-based correction (Mechanism::model_correction): the
 // person's force on the handle gets
-//   −(ΔM Δẍ + ΔD Δẋ + ΔK Δx + ΔD_τ Δẋ(t − τ) + ΔK_τ Δx(t − τ)),
+//   −(ΔM Δẍ + ΔK Δx + ΔD_τ Δẋ(t − τ) + ΔK_τ Δx(t − τ)),
 // and with sensor_lag_s > 0 the admittance renders from a first-order
 // lagged reading f_r of the force the sensor bears (τ_s ḟ_r = f_s − f_r).
 struct LinearExtension {
-  Eigen::Matrix2d mass_kg = Eigen::Matrix2d::Zero(), damping_nspm = Eigen::Matrix2d::Zero(), stiffness_npm = Eigen::Matrix2d::Zero();
+  Eigen::Matrix2d mass_kg = Eigen::Matrix2d::Zero(), stiffness_npm = Eigen::Matrix2d::Zero();
   Eigen::Matrix2d damping_delayed_nspm = Eigen::Matrix2d::Zero(), stiffness_delayed_npm = Eigen::Matrix2d::Zero();
   double delay_s = 0.0;  // of the delayed terms (≥ one sample when they are used)
   double sensor_lag_s = 0.0;
