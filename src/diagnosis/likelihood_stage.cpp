@@ -41,6 +41,9 @@ struct Profile {
   double alpha = 0.0;
   PemBaseline fit;
   int evaluations = 0;
+  // 95 % profile-likelihood half-width in α (stats::profile_interval; NaN
+  // when the profile is not convex around its best points).
+  double half_width = std::numeric_limits<double>::quiet_NaN();
 };
 Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaseline& fit0) {
   Profile out;
@@ -70,6 +73,12 @@ Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaselin
   std::sort(pts.begin(), pts.end(), by_nll);
   out.alpha = pts[0].first;
   out.fit = pts[0].second;
+  std::vector<double> xs, ys;
+  for (const auto& p : pts) {
+    xs.push_back(p.first);
+    ys.push_back(nll_of(p.second));
+  }
+  out.half_width = stats::profile_interval(xs, ys).half_width;
   return out;
 }
 
@@ -110,8 +119,12 @@ void parallel_for(std::size_t n, const std::function<void(std::size_t)>& f) {
 // correction at α as that fit has it.
 using FitAt = std::function<PemBaseline(double, const std::vector<std::size_t>*, const PemBaseline&)>;
 using CorrAt = std::function<Correction(double, const PemBaseline&)>;
-void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc, const PemBaseline& start, const FitAt& fit_at,
-                   const CorrAt& corr_at, int fits_per_eval, LikelihoodCandidate& lc, int& evaluations) {
+// acc: the accepted corrections of the model without the candidate;
+// acc_with: theirs in the model with it (the accepted amplitudes refitted
+// jointly with the candidate, on all trials: nuisance parameters of both
+// models, one per accepted mechanism).
+void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc, const Correction& acc_with, const PemBaseline& start,
+                   const FitAt& fit_at, const CorrAt& corr_at, int fits_per_eval, LikelihoodCandidate& lc, int& evaluations) {
   const std::size_t n = prep.pw.size();
   if (folds < 3 || n < static_cast<std::size_t>(folds)) return;
   std::vector<double> gain(static_cast<std::size_t>(folds), std::numeric_limits<double>::quiet_NaN());
@@ -121,8 +134,10 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
     std::vector<std::size_t> train, test;
     for (std::size_t i = 0; i < n; ++i) (static_cast<int>(i * static_cast<std::size_t>(folds) / n) == k ? test : train).push_back(i);
     const PemBaseline base = fit_default_method(prep, acc.empty() ? nullptr : &acc, &train, &start);
-    const auto pr = profile([&](double a) { return fit_at(a, &train, base); }, base);
-    evals[ku] = 1 + fits_per_eval * pr.evaluations;
+    const bool joint = !acc_with.empty();  // the accepted amplitudes differ with the candidate
+    const PemBaseline base_with = joint ? fit_default_method(prep, &acc_with, &train, &base) : base;
+    const auto pr = profile([&](double a) { return fit_at(a, &train, base_with); }, base_with);
+    evals[ku] = (joint ? 2 : 1) + fits_per_eval * pr.evaluations;
     if (!base.has_likelihood || !pr.fit.has_likelihood) return;
     auto test_nll = [&](const Correction* c, const PemBaseline& f) {
       const auto all = corrected_pem_windows(prep, c);
@@ -133,7 +148,7 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
       for (const double x : v) t += x;
       return t;
     };
-    const auto c_ext = add(acc, corr_at(pr.alpha, pr.fit));
+    const auto c_ext = add(acc_with, corr_at(pr.alpha, pr.fit));
     const double before = test_nll(acc.empty() ? nullptr : &acc, base);
     const double after = test_nll(&c_ext, pr.fit);
     gain[ku] = (before - after) / static_cast<double>(test.size());
@@ -151,6 +166,30 @@ std::string g4(double v) {
   char b[32];
   std::snprintf(b, sizeof b, "%.4g", v);
   return b;
+}
+
+// A named mechanism's parameters, "name value [lo, hi] unit;" (the interval
+// for gains that have one), and the same as JSON.
+std::string params_text(const std::vector<ParamEstimate>& ps) {
+  std::string o;
+  for (const auto& p : ps) {
+    o += " " + p.name + " " + g4(p.est.value);
+    if (!p.shape && p.est.hi > p.est.lo) o += " [" + g4(p.est.lo) + ", " + g4(p.est.hi) + "]";
+    o += " " + p.unit + ";";
+  }
+  return o;
+}
+nlohmann::json params_json(const std::vector<ParamEstimate>& ps) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& p : ps) {
+    nlohmann::json jp = {{"value", p.est.value}, {"unit", p.unit}};
+    if (!p.shape && p.est.hi > p.est.lo) {
+      jp["lo95"] = p.est.lo;
+      jp["hi95"] = p.est.hi;
+    }
+    j[p.name] = jp;
+  }
+  return j;
 }
 
 }  // namespace
@@ -249,6 +288,30 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     one.accepted_settings = {c.setting};
     return extension_correction(d, one, lib, a * c.unit_scale);
   };
+  // The gain parameters of a candidate at amplitude lc.alpha (after its shape
+  // parameters), with the 95 % profile-likelihood interval of α (half-width
+  // h, NaN: none), against `fit` for the reflex's intrinsic gain.
+  auto set_amplitude = [&](LikelihoodCandidate& lc, const Cand& c, const PemBaseline& fit, double h) {
+    const auto nsp = c.mech->shape_params().size();
+    const auto gs = c.mech->gains();
+    lc.params.resize(nsp);
+    lc.alpha_half_width = h;
+    for (std::size_t g = 0; g < gs.size(); ++g) {
+      const double v = lc.alpha * c.gains_ee[g];
+      double lo = v, hi = v;
+      if (std::isfinite(h)) {
+        lo = std::min((lc.alpha - h) * c.gains_ee[g], (lc.alpha + h) * c.gains_ee[g]);
+        hi = std::max((lc.alpha - h) * c.gains_ee[g], (lc.alpha + h) * c.gains_ee[g]);
+      }
+      lc.params.push_back({gs[g].name, gs[g].unit, {v, lo, hi}, gs[g].plausible_lo, gs[g].plausible_hi, true});
+    }
+    if (lc.id == "short_latency_reflex" && fit.available && std::fabs(fit.k.trace()) > 0) {
+      // The column copies the apparent D, K ≈ (1 + g) × intrinsic; against
+      // the corrected (intrinsic) K the reflex gain is g = g_app tr K_app / tr K.
+      const double g = lc.alpha * c.gains_ee.front() * d.planar_ref_k.trace() / fit.k.trace();
+      lc.params.push_back({"reflex_gain", "1", {g, g, g}, -0.2, 1.5, true});
+    }
+  };
   // The default method with the accepted corrections and the candidate's at
   // α. A model-based correction depends on the D, K it is simulated at: two
   // passes (at the start's D, K, then at the first fit's): measured on a
@@ -266,10 +329,55 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     return f;
   };
 
+  // The accepted mechanisms with their amplitudes; their correction at the
+  // D, K of `at` (all but `skip`).
+  struct Accepted {
+    std::size_t cand;
+    double alpha;
+    double half_width;  // of α, from its last profile (the others fixed)
+  };
+  auto sum_of = [&](const std::vector<Accepted>& list, std::size_t skip, const PemBaseline& at) {
+    Correction c;
+    for (std::size_t j = 0; j < list.size(); ++j)
+      if (j != skip) c = add(c, correction_of(cands[list[j].cand], list[j].alpha, at));
+    return c;
+  };
+  // Joint refit of the accepted amplitudes (coordinate descent: each
+  // amplitude profiled with the others fixed, sweeps until none moves by
+  // more than 2 % of its size, at most 3), ending with one fit whose
+  // model-based corrections are simulated at its own D, K. The greedy rounds
+  // fit each amplitude once, without the mechanisms accepted after it: a
+  // hidden 2 ms actuation delay with 1 N of friction left the friction
+  // amplitude holding part of the delay, the delay 10-20 % short and D 20-50 %
+  // low (docs/diagnosis.md, "Joint refit").
+  auto refit_jointly = [&](std::vector<Accepted>& list, PemBaseline& fit) {
+    for (int sweep = 0; sweep < 3; ++sweep) {
+      double moved = 0.0;
+      for (std::size_t j = 0; j < list.size(); ++j) {
+        const auto others = sum_of(list, j, fit);
+        const double a0 = list[j].alpha, step = 0.5 * std::max(std::fabs(a0), 0.2);
+        const auto& c = cands[list[j].cand];
+        const auto pr = profile([&](double t) { return fit_at(c, a0 + t * step, others, nullptr, fit); }, fit);
+        st.evaluations += passes(c) * pr.evaluations;
+        list[j].half_width = pr.half_width * step;
+        if (!(nll_of(pr.fit) < nll_of(fit))) continue;
+        list[j].alpha = a0 + pr.alpha * step;
+        fit = pr.fit;
+        moved = std::max(moved, std::fabs(pr.alpha * step) / std::max(std::fabs(a0), 1e-9));
+      }
+      if (moved < 0.02) break;
+    }
+    const auto all = sum_of(list, list.size(), fit);
+    auto last = fit_default_method(prep, &all, nullptr, &fit);
+    ++st.evaluations;
+    if (last.available && last.has_likelihood) fit = std::move(last);
+  };
+
   st.available = true;
   st.nll_baseline = nll_of(prep.pem);
   PemBaseline cur = prep.pem;
   Correction acc;
+  std::vector<Accepted> acc_list;
   std::vector<bool> used(cands.size(), false);
   for (std::size_t round = 0; round < cands.size(); ++round) {
     LikelihoodRound rd;
@@ -342,20 +450,12 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
           lc.implausible_reason = sp[s].name + " on the edge of its search range";
         }
       }
-      for (std::size_t g = 0; g < gs.size(); ++g) {
-        const double v = lc.alpha * c.gains_ee[g];
-        lc.params.push_back({gs[g].name, gs[g].unit, {v, v, v}, gs[g].plausible_lo, gs[g].plausible_hi, true});
-        if (!lc.params.back().plausible() && lc.plausible) {
+      set_amplitude(lc, c, pr.fit, pr.half_width);
+      for (std::size_t g = sp.size(); g < sp.size() + gs.size() && lc.plausible; ++g)
+        if (const auto& q = lc.params[g]; !q.plausible()) {
           lc.plausible = false;
-          lc.implausible_reason = gs[g].name + " " + g4(v) + " " + gs[g].unit + " outside " + g4(gs[g].plausible_lo) + " … " + g4(gs[g].plausible_hi);
+          lc.implausible_reason = q.name + " " + g4(q.est.value) + " " + q.unit + " outside " + g4(q.plausible_lo) + " … " + g4(q.plausible_hi);
         }
-      }
-      if (lc.id == "short_latency_reflex" && pr.fit.available && std::fabs(pr.fit.k.trace()) > 0) {
-        // The column copies the apparent D, K ≈ (1 + g) × intrinsic; against
-        // the corrected (intrinsic) K the reflex gain is g = g_app tr K_app / tr K.
-        const double g = lc.alpha * c.gains_ee.front() * d.planar_ref_k.trace() / pr.fit.k.trace();
-        lc.params.push_back({"reflex_gain", "1", {g, g, g}, -0.2, 1.5, true});
-      }
       rd.candidates.push_back(std::move(lc));
       idx.push_back(i);
     }
@@ -379,12 +479,21 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     }
     auto& w = rd.candidates[static_cast<std::size_t>(win)];
     const auto ci = idx[static_cast<std::size_t>(win)];
+    std::vector<Accepted> joint = acc_list;
+    joint.push_back({ci, w.alpha, w.alpha_half_width});
+    PemBaseline joint_fit = w.fit;
+    if (progress)
+      progress(joint.size() > 1 ? "likelihood check: refitting the amplitudes of " + std::to_string(joint.size()) + " mechanisms jointly"
+                                : "likelihood check: refining the amplitude of " + w.id);
+    refit_jointly(joint, joint_fit);
+    // The accepted corrections beside the candidate, at the joint amplitudes.
+    const Correction acc_with = joint.size() > 1 ? sum_of(joint, joint.size() - 1, joint_fit) : Correction{};
     if (folds > 0) {
       if (progress) progress("likelihood check: held-out trials for " + w.id + " (" + std::to_string(folds) + " folds)");
       const auto& cw = cands[ci];
       heldout_check(
-          prep, folds, acc, cur,
-          [&](double a, const std::vector<std::size_t>* trials, const PemBaseline& start) { return fit_at(cw, a, acc, trials, start); },
+          prep, folds, acc, acc_with, cur,
+          [&](double a, const std::vector<std::size_t>* trials, const PemBaseline& start) { return fit_at(cw, a, acc_with, trials, start); },
           [&](double a, const PemBaseline& f) { return correction_of(cw, a, f); }, passes(cw), w, st.evaluations);
       if (round > 0 && w.heldout_done && !(w.heldout.p_value < alpha)) {
         w.heldout_rejected = true;
@@ -395,10 +504,18 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       }
     }
     used[ci] = true;
-    acc = add(acc, correction_of(cands[ci], w.alpha, w.fit));
-    cur = w.fit;
+    acc_list = joint;
+    cur = joint_fit;
+    acc = sum_of(acc_list, acc_list.size(), cur);
     st.accepted.push_back(w.id);
     st.accepted_fits.push_back(w);
+    // The reported amplitudes of every accepted mechanism are the joint ones.
+    for (std::size_t j = 0; j < acc_list.size(); ++j) {
+      auto& af = st.accepted_fits[j];
+      af.alpha = acc_list[j].alpha;
+      af.fit = cur;
+      set_amplitude(af, cands[acc_list[j].cand], cur, acc_list[j].half_width);
+    }
     if (progress) progress("likelihood check: accepted " + w.id);
     st.rounds.push_back(std::move(rd));
   }
@@ -451,6 +568,8 @@ std::string likelihood_text(const LikelihoodStage& s) {
     o << "  result: named";
     for (std::size_t a = 0; a < s.accepted.size(); ++a) o << (a ? ", then " : " ") << s.accepted[a];
     o << "; NLL " << g4(s.nll_baseline) << " -> " << g4(s.nll_final) << " (" << s.evaluations << " fits of the default method)\n";
+    o << "  named parameters (amplitudes refitted jointly; [95 % profile-likelihood interval, the others fixed]):\n";
+    for (const auto& f : s.accepted_fits) o << "    " << f.id << ":" << params_text(f.params) << "\n";
     const auto z = s.impedance();
     o << "  corrected estimate (" << s.fit.method << " with the extension): D [" << g4(z.d(0, 0)) << " " << g4(z.d(0, 1)) << "; " << g4(z.d(1, 0)) << " "
       << g4(z.d(1, 1)) << "] N s/m, K [" << g4(z.k(0, 0)) << " " << g4(z.k(0, 1)) << "; " << g4(z.k(1, 0)) << " " << g4(z.k(1, 1)) << "] N/m\n";
@@ -487,6 +606,10 @@ nlohmann::json likelihood_json(const LikelihoodStage& s) {
     }
     j["rounds"].push_back(jr);
   }
+  // The named mechanisms' parameters at the joint refit (the rounds keep
+  // what each round saw).
+  j["named_params"] = nlohmann::json::object();
+  for (const auto& f : s.accepted_fits) j["named_params"][f.id] = params_json(f.params);
   if (s.misfit_found()) {
     const auto z = s.impedance();
     j["corrected"] = {{"method", s.fit.method},
@@ -528,6 +651,7 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
   if (s.available) {
     c.decided_by = "likelihood";
     c.named = s.accepted;
+    for (const auto& f : s.accepted_fits) c.named_params.push_back(f.params);
     if (s.misfit_found()) {
       c.has_corrected = true;
       c.corrected = s.impedance();
@@ -611,6 +735,8 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
   if (dg.accepted.empty()) o << " none";
   for (const auto& a : dg.accepted) o << " " << a;
   o << ")\n";
+  for (std::size_t i = 0; i < c.named_params.size() && i < c.named.size(); ++i) o << "  " << c.named[i] << ":" << params_text(c.named_params[i]) << "\n";
+  if (!c.named_params.empty()) o << "  ([…]: 95 % profile-likelihood interval of the amplitude, the other named amplitudes fixed)\n";
   if (c.has_corrected)
     o << "  corrected impedance: D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; " << g4(c.corrected.d(1, 0)) << " "
       << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " " << g4(c.corrected.k(0, 1)) << "; " << g4(c.corrected.k(1, 0)) << " "
@@ -623,6 +749,8 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
 
 nlohmann::json conclusion_json(const Conclusion& c) {
   nlohmann::json j = {{"decided_by", c.decided_by}, {"named", c.named}, {"misfit", !c.named.empty()}};
+  j["named_params"] = nlohmann::json::object();
+  for (std::size_t i = 0; i < c.named_params.size() && i < c.named.size(); ++i) j["named_params"][c.named[i]] = params_json(c.named_params[i]);
   j["alternatives"] = nlohmann::json::array();
   for (const auto& a : c.alternatives)
     j["alternatives"].push_back({{"for", a.named}, {"id", a.id}, {"gain", a.gain}, {"delay_s", a.delay_s}, {"why", a.why}});

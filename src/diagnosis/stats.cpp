@@ -212,4 +212,53 @@ double percentile(std::vector<double> x, double q) {
   return x[lo] + (pos - static_cast<double>(lo)) * (x[hi] - x[lo]);
 }
 
+ProfileInterval profile_interval(std::span<const double> a, std::span<const double> nll, double level) {
+  ProfileInterval out{std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  std::vector<double> xs, ys;
+  for (std::size_t i = 0; i < a.size() && i < nll.size(); ++i)
+    if (std::isfinite(a[i]) && std::isfinite(nll[i])) {
+      xs.push_back(a[i]);
+      ys.push_back(nll[i]);
+    }
+  if (xs.size() < 3) return out;
+  // Least-squares parabola y = c0 + c1 u + c2 u², u = (x − x̄)/s, through
+  // every point: the profile's points lie on both sides of the optimum and
+  // the closest ones differ by the optimiser's tolerance only.
+  const double n = static_cast<double>(xs.size());
+  const double xm = std::accumulate(xs.begin(), xs.end(), 0.0) / n;
+  double sc = 0.0;
+  for (const double x : xs) sc = std::max(sc, std::fabs(x - xm));
+  if (!(sc > 0)) return out;
+  double m[3][4] = {};
+  for (std::size_t i = 0; i < xs.size(); ++i) {
+    const double u = (xs[i] - xm) / sc;
+    const double r[3] = {1.0, u, u * u};
+    for (int p = 0; p < 3; ++p) {
+      for (int q = 0; q < 3; ++q) m[p][q] += r[p] * r[q];
+      m[p][3] += r[p] * ys[i];
+    }
+  }
+  // Gaussian elimination with partial pivoting on the 3 x 3 normal equations.
+  for (int c = 0; c < 3; ++c) {
+    int piv = c;
+    for (int r = c + 1; r < 3; ++r)
+      if (std::fabs(m[r][c]) > std::fabs(m[piv][c])) piv = r;
+    if (std::fabs(m[piv][c]) < 1e-12 * n) return out;  // fewer than three distinct abscissae
+    for (int k = 0; k < 4; ++k) std::swap(m[c][k], m[piv][k]);
+    for (int r = 0; r < 3; ++r) {
+      if (r == c) continue;
+      const double f = m[r][c] / m[c][c];
+      for (int k = c; k < 4; ++k) m[r][k] -= f * m[c][k];
+    }
+  }
+  const double c1 = m[1][3] / m[1][1], c2 = m[2][3] / m[2][2];
+  if (!(c2 > 0)) return out;
+  const double curv = c2 / (sc * sc);  // in x units
+  out.center = xm - 0.5 * c1 / c2 * sc;
+  // chi2_1 quantile = z², z the two-sided normal quantile.
+  const double z = norm_isf(0.5 * (1.0 - level));
+  out.half_width = std::sqrt(z * z / (2.0 * curv));
+  return out;
+}
+
 }  // namespace manip::diagnosis::stats

@@ -2,9 +2,11 @@
 // tests/fixtures/diagnosis/make_fixtures.py), and Holm's procedure against
 // a hand-worked example.
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "fixtures.hpp"
 #include "manip/diagnosis/stats.hpp"
@@ -59,4 +61,44 @@ TEST_CASE("one-sided t test of fold gains", "[diagnosis][stats]") {
   CHECK(t.t == Approx(3.0 / std::sqrt(0.5)));
   CHECK(t.p_value == Approx(stats::t_sf(3.0 / std::sqrt(0.5), 4.0)));
   CHECK(t.p_value < 0.01);
+}
+
+TEST_CASE("profile-likelihood interval of a parabolic profile", "[diagnosis][stats]") {
+  // NLL(a) = 100 + 40 (a - 0.7)^2: 2 (NLL - min) <= chi2_1(0.95) = 3.841458820694124
+  // (scipy.stats.chi2.ppf(0.95, 1)) gives a = 0.7 +- sqrt(3.8414588 / 80).
+  const double half = std::sqrt(3.841458820694124 / 80.0);
+  auto nll = [](double a) { return 100.0 + 40.0 * (a - 0.7) * (a - 0.7); };
+  SECTION("the profile's points, unevenly spaced, in the order profile() evaluates them") {
+    const std::vector<double> a = {0.0, 1.0, 2.0, 0.68, 0.71};
+    std::vector<double> y;
+    for (const double x : a) y.push_back(nll(x));
+    const auto pi = stats::profile_interval(a, y);
+    CHECK(pi.center == Approx(0.7).epsilon(1e-10));
+    CHECK(pi.half_width == Approx(half).epsilon(1e-10));
+  }
+  SECTION("a 99 % level widens it by z_0.995 / z_0.975") {
+    const std::vector<double> a = {0.2, 0.9, 1.3};
+    std::vector<double> y;
+    for (const double x : a) y.push_back(nll(x));
+    const auto pi = stats::profile_interval(a, y, 0.99);
+    CHECK(pi.half_width == Approx(half * 2.5758293035489004 / 1.959963984540054).epsilon(1e-9));
+  }
+  SECTION("the least-squares parabola through points off a parabola (hand-solved normal equations)") {
+    // x = -1, 0, 1, 2; y = 3, 1, 0, 4: y = c0 + c1 x + c2 x^2 by least squares
+    // gives c2 = 1.5, c1 = -1.3, c0 = 0.4 (normal equations by hand from the
+    // sums x 2, x^2 6, x^3 8, x^4 18, y 8, xy 5, x^2 y 19; numpy.polyfit
+    // agrees): vertex 1.3 / 3, half-width sqrt(3.8414588 / 3).
+    const std::vector<double> a = {-1, 0, 1, 2}, y = {3, 1, 0, 4};
+    const auto pi = stats::profile_interval(a, y);
+    CHECK(pi.center == Approx(1.3 / 3.0).epsilon(1e-10));
+    CHECK(pi.half_width == Approx(std::sqrt(3.841458820694124 / 3.0)).epsilon(1e-9));
+  }
+  SECTION("not convex, or too few distinct points: no interval") {
+    const std::vector<double> a = {0.0, 1.0, 2.0}, concave = {0.0, 1.0, 0.0};
+    CHECK(std::isnan(stats::profile_interval(a, concave).half_width));
+    const std::vector<double> a2 = {0.0, 1.0, 1.0}, y2 = {1.0, 0.0, 0.0};
+    CHECK(std::isnan(stats::profile_interval(a2, y2).half_width));
+    const std::vector<double> one = {0.5}, y1 = {1.0};
+    CHECK(std::isnan(stats::profile_interval(one, y1).half_width));
+  }
 }

@@ -31,6 +31,7 @@
 // parameters (α × gains inside their bounds, shapes not on the edge of their
 // grid). Greedy rounds until no candidate is significant.
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -59,7 +60,11 @@ struct LikelihoodCandidate {
   // change what the lab measures (seen on clean sessions: an inertia a few
   // per cent off the a-priori M_BSP, LR 7-9).
   double relevance = 0.0;
-  std::vector<ParamEstimate> params;  // shape params, then α × gains
+  // Shape params, then α × gains with the 95 % profile-likelihood interval of
+  // α (stats::profile_interval; for accepted candidates after the joint
+  // refit, each amplitude's profile with the others fixed).
+  std::vector<ParamEstimate> params;
+  double alpha_half_width = std::numeric_limits<double>::quiet_NaN();
   PemBaseline fit;                    // default method at the optimum (accepted ones included)
   // Accepted candidates only: cross-validation over trials (folds of
   // neighbouring trials, as the equation-error search): per fold, both models
@@ -124,6 +129,11 @@ struct Alternative {
 struct Conclusion {
   std::string decided_by;  // "likelihood" or "equation_error"
   std::vector<std::string> named;
+  // Per named mechanism (same order), its parameters as the deciding stage
+  // has them (the likelihood check: joint amplitudes with 95 %
+  // profile-likelihood intervals; the equation-error search: empty, its
+  // bootstrap intervals are in its own section).
+  std::vector<std::vector<ParamEstimate>> named_params;
   bool has_corrected = false;
   PlanarImpedance corrected;
   std::vector<Alternative> alternatives;

@@ -50,6 +50,17 @@ struct OneSidedT {
 // Holm (1979) step-down adjusted p-values (family-wise error control), same order as input.
 [[nodiscard]] std::vector<double> holm_adjust(std::span<const double> p);
 
+// Profile-likelihood interval of a one-parameter profile from the
+// least-squares parabola through its points (a, NLL): NLL(a) ≈ NLL_min +
+// c (a − a*)², and {a : 2 (NLL(a) − NLL_min) ≤ chi2_1(level)} =
+// a* ± sqrt(chi2_1(level) / (2c)) (Wilks). center and half_width are NaN
+// when there are fewer than three distinct abscissae or c ≤ 0.
+struct ProfileInterval {
+  double center = 0.0;
+  double half_width = 0.0;
+};
+[[nodiscard]] ProfileInterval profile_interval(std::span<const double> a, std::span<const double> nll, double level = 0.95);
+
 // Percentile of a sample (linear interpolation between order statistics, numpy's default).
 [[nodiscard]] double percentile(std::vector<double> x, double q_percent);
 
