@@ -537,9 +537,15 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
         for (const auto& a : o.concl.alternatives) std::fprintf(stderr, "; or %s gain %.3f", a.id.c_str(), a.gain);
         for (const auto& n : named)
           if (const auto* f = o.named_fit(n))
-            for (const auto& p : f->params) std::fprintf(stderr, "; %s.%s %.4g", n.c_str(), p.name.c_str(), p.est.value);
+            for (const auto& p : f->params) std::fprintf(stderr, "; %s.%s %.4g [%.4g, %.4g]", n.c_str(), p.name.c_str(), p.est.value, p.est.lo, p.est.hi);
         // Signed relative errors of the reported D, K (diagonals) and their
         // Frobenius errors: which way the corrected estimate misses.
+        for (const auto& e : eff)
+          if (const auto mp = main_param_of(e, o.draw, 4000.0); const auto* f = o.named_fit(mp.id))
+            for (const auto& p : f->params)
+              if (p.name == mp.param && p.est.hi > p.est.lo)
+                std::fprintf(stderr, "; truth %s %.4g %s its interval", mp.param.c_str(), mp.truth,
+                             mp.truth >= p.est.lo && mp.truth <= p.est.hi ? "inside" : "outside");
         std::fprintf(stderr, "; err D11 %+.3f D22 %+.3f K11 %+.3f K22 %+.3f |D| %.3f |K| %.3f", rel(dd(0, 0), dt(0, 0)),
                      rel(dd(1, 1), dt(1, 1)), rel(k(0, 0), kt(0, 0)), rel(k(1, 1), kt(1, 1)), frob(dd, dt), frob(k, kt));
         std::fprintf(stderr, "\n");
