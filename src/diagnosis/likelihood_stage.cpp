@@ -12,6 +12,7 @@
 #include <limits>
 #include <sstream>
 
+#include "manip/diagnosis/report.hpp"
 #include "manip/diagnosis/stats.hpp"
 #include "manip/estimation/pem.hpp"
 
@@ -169,7 +170,7 @@ std::string g4(double v) {
 }
 
 // A named mechanism's parameters, "name value [lo, hi] unit;" (the interval
-// for gains that have one), and the same as JSON.
+// for gains that have one), and as JSON by name (report.hpp's param_json).
 std::string params_text(const std::vector<ParamEstimate>& ps) {
   std::string o;
   for (const auto& p : ps) {
@@ -181,14 +182,7 @@ std::string params_text(const std::vector<ParamEstimate>& ps) {
 }
 nlohmann::json params_json(const std::vector<ParamEstimate>& ps) {
   nlohmann::json j = nlohmann::json::object();
-  for (const auto& p : ps) {
-    nlohmann::json jp = {{"value", p.est.value}, {"unit", p.unit}};
-    if (!p.shape && p.est.hi > p.est.lo) {
-      jp["lo95"] = p.est.lo;
-      jp["hi95"] = p.est.hi;
-    }
-    j[p.name] = jp;
-  }
+  for (const auto& p : ps) j[p.name] = param_json(p);
   return j;
 }
 
@@ -295,7 +289,6 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     const auto nsp = c.mech->shape_params().size();
     const auto gs = c.mech->gains();
     lc.params.resize(nsp);
-    lc.alpha_half_width = h;
     for (std::size_t g = 0; g < gs.size(); ++g) {
       const double v = lc.alpha * c.gains_ee[g];
       double lo = v, hi = v;
@@ -480,7 +473,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     auto& w = rd.candidates[static_cast<std::size_t>(win)];
     const auto ci = idx[static_cast<std::size_t>(win)];
     std::vector<Accepted> joint = acc_list;
-    joint.push_back({ci, w.alpha, w.alpha_half_width});
+    joint.push_back({ci, w.alpha, std::numeric_limits<double>::quiet_NaN()});  // half-width: set by the refit's profile
     PemBaseline joint_fit = w.fit;
     if (progress)
       progress(joint.size() > 1 ? "likelihood check: refitting the amplitudes of " + std::to_string(joint.size()) + " mechanisms jointly"

@@ -19,16 +19,6 @@ std::string interval(const Interval& i) { return g4(i.value) + " [" + g4(i.lo) +
 
 nlohmann::json jint(const Interval& i) { return {{"value", i.value}, {"ci95", {i.lo, i.hi}}}; }
 
-nlohmann::json jparam(const ParamEstimate& p) {
-  nlohmann::json j = {{"name", p.name}, {"unit", p.unit}, {"value", p.est.value}, {"ci95", {p.est.lo, p.est.hi}}};
-  if (p.has_bounds) {
-    j["plausible"] = {p.plausible_lo, p.plausible_hi};
-    j["within_plausible"] = p.plausible();
-    if (p.shape) j["at_edge_of_search"] = p.at_edge();
-  }
-  return j;
-}
-
 nlohmann::json jsig(const Signatures& s) {
   nlohmann::json x = nlohmann::json::array();
   for (const auto& c : s.xcorr)
@@ -57,6 +47,16 @@ void sig_text(std::ostringstream& o, const Signatures& s) {
 }
 
 }  // namespace
+
+nlohmann::json param_json(const ParamEstimate& p) {
+  nlohmann::json j = {{"name", p.name}, {"unit", p.unit}, {"value", p.est.value}, {"ci95", {p.est.lo, p.est.hi}}};
+  if (p.has_bounds) {
+    j["plausible"] = {p.plausible_lo, p.plausible_hi};
+    j["within_plausible"] = p.plausible();
+    if (p.shape) j["at_edge_of_search"] = p.at_edge();
+  }
+  return j;
+}
 
 std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
   std::ostringstream o;
@@ -156,7 +156,7 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
   j["folds"] = d.folds;
   j["blocks"] = d.blocks;
   j["guard_s"] = d.guard_s;
-  for (const auto& p : d.baseline_params) j["baseline"]["params"].push_back(jparam(p));
+  for (const auto& p : d.baseline_params) j["baseline"]["params"].push_back(param_json(p));
   j["baseline"]["heldout_vaf"] = jint(d.baseline_heldout.vaf);
   j["baseline"]["heldout_nrmse"] = jint(d.baseline_heldout.nrmse);
   j["baseline"]["fold_vaf"] = d.baseline_heldout.fold_vaf;
@@ -199,7 +199,7 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
   j["final"]["target_rms"] = d.target_rms;
   j["final"]["contribution_rms"] = d.contribution_rms;
   j["final"]["params"] = nlohmann::json::array();
-  for (const auto& p : d.final_params) j["final"]["params"].push_back(jparam(p));
+  for (const auto& p : d.final_params) j["final"]["params"].push_back(param_json(p));
   j["seconds"] = d.seconds;
   return j;
 }

@@ -307,11 +307,12 @@ TEST_CASE("manipulandum: hidden delay 2 ms + friction 1 N are both named, each w
     REQUIRE(j["named_params"].contains(mp.id));
     const auto& jp = j["named_params"][mp.id][mp.param];
     CHECK(jp["value"].get<double>() == Approx(v));
-    REQUIRE(jp.contains("lo95"));
-    INFO("interval [" << jp["lo95"].get<double>() << ", " << jp["hi95"].get<double>() << "]");
-    CHECK(jp["lo95"].get<double>() < v);
-    CHECK(jp["hi95"].get<double>() > v);
-    CHECK(jp["hi95"].get<double>() - jp["lo95"].get<double>() < 0.5 * std::fabs(v));  // informative: narrower than ±25 %
+    REQUIRE(jp.contains("ci95"));
+    const double lo = jp["ci95"][0].get<double>(), hi = jp["ci95"][1].get<double>();
+    INFO("interval [" << lo << ", " << hi << "]");
+    CHECK(lo < v);
+    CHECK(hi > v);
+    CHECK(hi - lo < 0.5 * std::fabs(v));  // informative: narrower than ±25 %
   }
   REQUIRE(o.concl.has_corrected);
   const auto& z = o.concl.corrected;

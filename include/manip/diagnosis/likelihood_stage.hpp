@@ -31,7 +31,6 @@
 // parameters (α × gains inside their bounds, shapes not on the edge of their
 // grid). Greedy rounds until no candidate is significant.
 #include <functional>
-#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -64,7 +63,6 @@ struct LikelihoodCandidate {
   // α (stats::profile_interval; for accepted candidates after the joint
   // refit, each amplitude's profile with the others fixed).
   std::vector<ParamEstimate> params;
-  double alpha_half_width = std::numeric_limits<double>::quiet_NaN();
   PemBaseline fit;                    // default method at the optimum (accepted ones included)
   // Accepted candidates only: cross-validation over trials (folds of
   // neighbouring trials, as the equation-error search): per fold, both models

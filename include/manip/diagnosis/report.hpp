@@ -18,6 +18,9 @@ struct ReportContext {
 };
 
 [[nodiscard]] std::string text_report(const Diagnosis& d, const ReportContext& ctx);
+// One fitted parameter as every section of the JSON report has it: name,
+// unit, value, ci95 [lo, hi], and its plausible range when it has one.
+[[nodiscard]] nlohmann::json param_json(const ParamEstimate& p);
 [[nodiscard]] nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx);
 
 // The JSON "traces" section (docs/diagnosis.md, "Figures (--plots)") from the
