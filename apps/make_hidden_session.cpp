@@ -73,6 +73,8 @@ static int run(int argc, char** argv) {
   app.add_option("--noise", noise, cli::join(kNoise) + " (default realistic)")->check(cli::one_of(kNoise));
   cli::add_movements(app, c.movements, 1, 100000, "number of movements");
   app.add_option("--reps", reps, "perturbed repetitions per angle (default 3)")->check(CLI::Range(1, 1000));
+  double pulse_s = 0.15, pulse_n = 15.0;
+  cli::add_pulse(app, pulse_s, pulse_n);
   app.add_option("--key", key,
                  "also write what was hidden (text) to this file (an existing file is kept unless --force)");
   app.add_flag("--no-truth", no_truth,
@@ -85,6 +87,8 @@ static int run(int argc, char** argv) {
   SessionDesign base;
   base.n_movements = c.movements;
   base.reps_per_angle = reps;
+  base.session.perturbation.duration_s = pulse_s;
+  base.session.perturbation.amplitude_n = pulse_n;
   base.session.source = "manip_sim/linear";
   auto person = table1_person();
   try {

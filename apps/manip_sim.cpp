@@ -68,6 +68,8 @@ int run(int argc, char** argv) {
   app.add_option("--reps", reps, "perturbed repetitions per angle (default 3: 24 perturbed trials; 0: none)")
       ->check(CLI::Range(0, 10000));
   app.add_option("--seed", seed, "random seed (schedule as in manip_rt's protocol.seed, reaches, noise)");
+  double pulse_s = 0.15, pulse_n = 15.0;
+  cli::add_pulse(app, pulse_s, pulse_n);
   std::string validate_dir;
   app.add_option("--validate", validate_dir,
                  "after writing, validate against the twin truth (paper §4.3: Fig. 3 PSDs, Fig. 4 NRMSE, max "
@@ -85,6 +87,8 @@ int run(int argc, char** argv) {
     d.n_movements = c.movements;
     d.reps_per_angle = reps;
     d.seed = seed;
+    d.session.perturbation.duration_s = pulse_s;
+    d.session.perturbation.amplitude_n = pulse_n;
     HumanSpec spec;
     spec.model = human;
     spec.sample_rate_hz = d.session.sample_rate_hz;

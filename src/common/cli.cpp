@@ -46,6 +46,16 @@ CLI::Option* add_movements(CLI::App& app, int& n, int min_n, int max_n, const st
   return app.add_option("--movements", n, what)->check(CLI::Range(min_n, max_n))->capture_default_str();
 }
 
+void add_pulse(CLI::App& app, double& duration_s, double& amplitude_n) {
+  app.add_option("--pulse-duration", duration_s,
+                 "perturbation pulse duration T_pert in s (default 0.15, paper §3.2; a shorter pulse shows a reflex's delay, docs/diagnosis.md)")
+      ->check(CLI::Range(1e-3, 2.0))
+      ->capture_default_str();
+  app.add_option("--pulse-amplitude", amplitude_n, "perturbation pulse amplitude A_pert in N (default 15, paper §3.2; at most 30)")
+      ->check(CLI::Range(0.0, 30.0))
+      ->capture_default_str();
+}
+
 CLI::Option* add_config(CLI::App& app, std::string& config, const std::string& default_name, const std::string& what) {
   return app.add_option("--config", config,
                         what + " (default " + default_name +

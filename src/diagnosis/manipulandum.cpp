@@ -1,4 +1,5 @@
 #include "manip/diagnosis/manipulandum.hpp"
+#include "manip/diagnosis/stats.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -70,6 +71,10 @@ class Projected final : public Mechanism {
   std::vector<std::vector<Eigen::Vector2d>> model_correction(const Dataset& d, std::span<const double> s, std::span<const double> g,
                                                              const Eigen::Matrix2d& dm, const Eigen::Matrix2d& km) const override {
     return inner_->model_correction(d, s, g, dm, km);
+  }
+  void next_reference(std::span<const double> s, std::span<const double> g, const Eigen::Matrix2d& d0, const Eigen::Matrix2d& k0,
+                      Eigen::Matrix2d& d1, Eigen::Matrix2d& k1) const override {
+    inner_->next_reference(s, g, d0, k0, d1, k1);
   }
   Columns columns(const Dataset& d, std::span<const double> s) const override {
     auto c = inner_->columns(d, s);
@@ -427,10 +432,7 @@ RefinedExtension refine_core(const PlanarPrepared& prep,
     std::sort(pts.begin(), pts.end(), [&](const auto& x, const auto& y) { return nll(x.second) < nll(y.second); });
     const double xa = pts[0].first, xb = pts[1].first, xc = pts[2].first;
     const double fa = nll(pts[0].second), fb = nll(pts[1].second), fc = nll(pts[2].second);
-    // Vertex of the parabola through (xa, fa), (xb, fb), (xc, fc).
-    const double num = (xb - xa) * (xb - xa) * (fb - fc) - (xb - xc) * (xb - xc) * (fb - fa);
-    const double den = (xb - xa) * (fb - fc) - (xb - xc) * (fb - fa);
-    double xn = std::fabs(den) > 0 ? xb - 0.5 * num / den : xa;
+    double xn = stats::parabola_vertex(xa, fa, xb, fb, xc, fc);
     if (!std::isfinite(xn)) xn = xa;
     xn = std::clamp(xn, 0.0, 3.0);
     bool seen = false;
@@ -881,10 +883,16 @@ class WrongMbsp final : public Mechanism {
 // power that a realistic reflex (g ≈ 0.5) sat two orders of magnitude below
 // their detection limit (docs/diagnosis.md, "Detection limits"); one gain
 // along the known direction leaves only the curvature of the response to
-// tell the delay apart, and uses all of it. D, K are the session's apparent
-// ones (Dataset::planar_ref_*): to first order (1 + g) times the intrinsic,
-// so the column's gain is g / (1 + g); the likelihood check reports g
-// against its corrected, intrinsic D, K.
+// tell the delay apart, and uses all of it.
+// The gain parameter is the reflex's share of the apparent impedance,
+// g_app = g / (1 + g) (to first order K_app = (1 + g) K): bounded, and what
+// the equation-error column (a delayed copy of the session's apparent D, K,
+// Dataset::planar_ref_*) estimates. The likelihood check's model-based
+// correction copies the fit's own, intrinsic D, K with g = g_app / (1 − g_app),
+// which makes D, K a fixed point of the fit (next_reference): copying the
+// apparent D, K fixes the ratio D : K of the delayed column to the baseline's,
+// which a short pulse moves far from the intrinsic one (50 ms, 20 N, reflex
+// 1.0: baseline K11 4.7 × intrinsic; docs/diagnosis.md, "Pulse").
 class PlanarReflex final : public Mechanism {
  public:
   std::string id() const override { return "short_latency_reflex"; }
@@ -918,11 +926,30 @@ class PlanarReflex final : public Mechanism {
   std::vector<std::vector<Vector2d>> model_correction(const Dataset& d, std::span<const double> s, std::span<const double> g,
                                                       const Matrix2d& dm, const Matrix2d& km) const override {
     LinearExtension e;
-    const double gain = g.empty() ? 0.0 : g[0];
-    e.damping_delayed_nspm = gain * d.planar_ref_d;
-    e.stiffness_delayed_npm = gain * d.planar_ref_k;
+    const double gain = intrinsic_gain(g);
+    e.damping_delayed_nspm = gain * dm;
+    e.stiffness_delayed_npm = gain * km;
     e.delay_s = s.empty() ? 0.03 : s[0];
     return simulate_extension(d, dm, km, [&](const PlanarTrial&) { return e; });
+  }
+  // One Newton step to the fixed point D, K = fit(copy of D, K). The fit
+  // absorbs what the delayed copy at (D0, K0) lacks: to first order
+  // (Δx(t − τ) ≈ Δx − τ Δẋ) it returns K1 = (1 + g) K − g K0 and
+  // D1 = (1 + g) D − g D0 + g τ (K0 − K) for the person's D, K; solved for
+  // them (exact when the fit is affine in the copy, as a linear model's is
+  // to first order; docs/diagnosis.md, "Pulse").
+  void next_reference(std::span<const double> s, std::span<const double> g, const Matrix2d& d0, const Matrix2d& k0, Matrix2d& d1,
+                      Matrix2d& k1) const override {
+    const double gain = intrinsic_gain(g), tau = s.empty() ? 0.03 : s[0];
+    const Matrix2d k = (k1 + gain * k0) / (1 + gain);
+    d1 = (d1 + gain * d0 - gain * tau * (k0 - k)) / (1 + gain);
+    k1 = k;
+  }
+  // g = g_app / (1 − g_app); the profile's g_app stays below 0.75, and a
+  // share ≥ 1 would be a reflex without an intrinsic part.
+  static double intrinsic_gain(std::span<const double> g) {
+    const double share = g.empty() ? 0.0 : std::min(g[0], 0.9);
+    return share / (1 - share);
   }
   std::vector<std::vector<double>> grid(const Dataset& d) const override {
     std::vector<std::vector<double>> g;

@@ -170,6 +170,13 @@ LjungBox ljung_box(std::span<const double> x, int lags) {
   return out;
 }
 
+double parabola_vertex(double xa, double fa, double xb, double fb, double xc, double fc) {
+  const double num = (xb - xa) * (xb - xa) * (fb - fc) - (xb - xc) * (xb - xc) * (fb - fa);
+  const double den = (xb - xa) * (fb - fc) - (xb - xc) * (fb - fa);
+  if (!(std::fabs(den) > 0)) return std::numeric_limits<double>::quiet_NaN();
+  return xb - 0.5 * num / den;
+}
+
 OneSidedT one_sided_t(std::span<const double> g) {
   OneSidedT out;
   out.n = static_cast<int>(g.size());

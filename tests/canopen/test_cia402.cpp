@@ -18,7 +18,7 @@ TEST_CASE("cia402: statusword decoding with the masks of CiA 402 (0x4F / 0x6F)")
     CHECK(decode(encode(s)) == s);
 }
 
-TEST_CASE("cia402: enable path 2, 3, 4 with the controlwords of the standard; disable 9") {
+TEST_CASE("cia402: enable path 2, 3, 4 with the controlwords of the standard - disable 9") {
   CHECK(master_step(0x0040, Target::OperationEnabled, false, 0).controlword == 0x06);
   CHECK(master_step(0x0040, Target::OperationEnabled, false, 0).transition == 2);
   CHECK(master_step(0x0021, Target::OperationEnabled, false, 0x06).controlword == 0x07);

@@ -61,7 +61,7 @@ TEST_CASE("canopen session: start-up remaps in pre-operational, exactly the CiA 
   CHECK(id.rated_current_ma == 5000u);
 }
 
-TEST_CASE("canopen session: enable preloads zero torque; 10000 cycles: 2 kHz SYNC, every TPDO, no SDO") {
+TEST_CASE("canopen session: enable preloads zero torque - 10000 cycles: 2 kHz SYNC, every TPDO, no SDO") {
   Session s(kTwoBuses);
   REQUIRE_FALSE(s.configure());
   const int64_t t_cyclic = s.rig.now();
@@ -331,7 +331,7 @@ TEST_CASE("canopen: if the master dies the drives stop by themselves") {
   }
 }
 
-TEST_CASE("canopen: remap outside pre-operational is refused (0x06040041); the master remaps drives left operational") {
+TEST_CASE("canopen: remap outside pre-operational is refused (0x06040041) - the master remaps drives left operational") {
   // Direct SDO client against a simulated drive that is operational.
   SimDriveParams p;
   SimulatedDrive d(p);

@@ -5,6 +5,7 @@
 // truth for the checks comes from the generator.
 #include <cmath>
 #include <cstdlib>
+#include <memory>
 #include <numbers>
 #include <sstream>
 #include <string>
@@ -47,6 +48,8 @@ struct Case {
   sim::NoiseLevel noise = sim::NoiseLevel::realistic;
   int bootstrap = 50;
   int heldout_folds = -1;  // the likelihood check's held-out folds (-1: the engine's 10)
+  double pulse_s = 0.0;    // perturbation pulse duration (0: the schema's 150 ms, paper §3.2)
+  double pulse_n = 0.0;    // its amplitude (0: the schema's 15 N)
 };
 
 inline Outcome run_case(const Case& c) {
@@ -54,6 +57,8 @@ inline Outcome run_case(const Case& c) {
   base.n_movements = c.movements;
   base.reps_per_angle = c.reps;
   base.session.source = "manip_sim/linear";
+  if (c.pulse_s > 0) base.session.perturbation.duration_s = c.pulse_s;
+  if (c.pulse_n > 0) base.session.perturbation.amplitude_n = c.pulse_n;
   auto person = sim::table1_person();
   sim::apply_noise(c.noise, base, person);
   auto hs = sim::make_hidden_session(base, person, c.effects, c.hidden_seed);
@@ -110,6 +115,13 @@ inline Dataset one_pulse_trial() {
 }
 
 inline double rel(double est, double truth) { return (est - truth) / std::fabs(truth); }
+
+// The library's mechanism `id` (nullptr: not in it).
+inline const Mechanism* find_mechanism(const std::vector<std::unique_ptr<Mechanism>>& lib, const std::string& id) {
+  for (const auto& m : lib)
+    if (m->id() == id) return m.get();
+  return nullptr;
+}
 
 // Pooled K and D accuracy in the sense of the issue: the largest relative
 // error of the diagonal elements (the off-diagonals are small and their

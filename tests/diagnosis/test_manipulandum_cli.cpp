@@ -3,6 +3,7 @@
 
 #include <sys/wait.h>
 
+#include <filesystem>
 #include <string>
 
 #include "fixtures.hpp"
@@ -18,13 +19,18 @@ int code(int st) { return st; }
 
 struct Count final : logging::SessionHandler {
   int states = 0, truth_states = 0, truth_imp = 0;
+  double pert_duration_s = 0.0, pert_amplitude_n = 0.0;
+  void on_session(const manip::session_t& m) override {
+    pert_duration_s = m.pert_duration_s;
+    pert_amplitude_n = m.pert_amplitude_n;
+  }
   void on_state(const manip::state_t&) override { ++states; }
   void on_truth_state(const manip::state_t&) override { ++truth_states; }
   void on_truth_impedance(const manip::impedance_truth_t&) override { ++truth_imp; }
 };
 }  // namespace
 
-TEST_CASE("make_hidden_session --no-truth leaves the truth channels out; diagnose_model refuses too few trials saying how many") {
+TEST_CASE("make_hidden_session --no-truth leaves the truth channels out - diagnose_model refuses too few trials saying how many") {
   const auto dir = testutil::temp_dir("manip_cli");
   const std::string with = dir + "/with.lcm", without = dir + "/without.lcm";
   std::string out;
@@ -49,4 +55,27 @@ TEST_CASE("make_hidden_session --no-truth leaves the truth channels out; diagnos
   // configuration), so check the message path with a different sample rate
   // through the library test (test_manipulandum.cpp); here: both inputs at once is a usage error.
   CHECK(code(testutil::run_command(kDiag + " -q " + without + " --single-joint x.csv", &out)) == exit_code::kUsage);
+}
+
+TEST_CASE("make_hidden_session and manip_sim --pulse-duration, --pulse-amplitude: the session header carries the pulse - out of range is a usage error") {
+  const auto dir = testutil::temp_dir("manip_cli_pulse");
+  const std::string sim = std::string(MANIP_BINARY_DIR) + "/apps/manip_sim";
+  for (const auto& prog : {kHidden, sim}) {
+    INFO(prog);
+    const std::string log = dir + "/pulse.lcm";
+    std::string out;
+    REQUIRE(code(testutil::run_command(prog + " -q --out " + log + " --movements 12 --reps 1 --pulse-duration 0.05 --pulse-amplitude 20 --force", &out)) ==
+            0);
+    Count c;
+    (void)logging::read_log(log, c);
+    CHECK(c.pert_duration_s == Approx(0.05));
+    CHECK(c.pert_amplitude_n == Approx(20.0));
+    // Above rt.yaml's default safety limit (30 N), and a zero-length pulse: refused, naming the option, no log written.
+    const std::string bad = dir + "/bad.lcm";
+    CHECK(code(testutil::run_command(prog + " -q --out " + bad + " --movements 12 --reps 1 --pulse-amplitude 45", &out)) == exit_code::kUsage);
+    CHECK(out.find("--pulse-amplitude") != std::string::npos);
+    CHECK(code(testutil::run_command(prog + " -q --out " + bad + " --movements 12 --reps 1 --pulse-duration 0", &out)) == exit_code::kUsage);
+    CHECK(out.find("--pulse-duration") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(bad));
+  }
 }

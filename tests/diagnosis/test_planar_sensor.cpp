@@ -25,9 +25,7 @@ using Eigen::Vector2d;
 
 TEST_CASE("planar sensor: force_sensor_lag is in the library, bounds 0-10 ms") {
   const auto lib = planar_library();
-  const Mechanism* m = nullptr;
-  for (const auto& x : lib)
-    if (x->id() == "force_sensor_lag") m = x.get();
+  const Mechanism* m = find_mechanism(lib, "force_sensor_lag");
   REQUIRE(m);
   REQUIRE(m->gains().size() == 1);
   CHECK(m->gains()[0].name == "sensor_lag");

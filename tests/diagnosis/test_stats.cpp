@@ -102,3 +102,15 @@ TEST_CASE("profile-likelihood interval of a parabolic profile", "[diagnosis][sta
     CHECK(std::isnan(stats::profile_interval(one, y1).half_width));
   }
 }
+
+TEST_CASE("stats: parabola_vertex finds the vertex of the parabola through three points") {
+  // f(x) = 3 (x − 1.3)² + 2 (vertex 1.3), at unequal spacings and in any order.
+  auto f = [](double x) { return 3.0 * (x - 1.3) * (x - 1.3) + 2.0; };
+  CHECK(stats::parabola_vertex(0.0, f(0.0), 1.0, f(1.0), 2.5, f(2.5)) == Approx(1.3).epsilon(1e-12));
+  CHECK(stats::parabola_vertex(2.5, f(2.5), 0.0, f(0.0), 1.0, f(1.0)) == Approx(1.3).epsilon(1e-12));
+  // The reflex's delay grid: 25, 30, 35 ms around a vertex at 32.8 ms.
+  auto g = [](double x) { return -40.0 * (x - 0.0328) * (x - 0.0328); };
+  CHECK(stats::parabola_vertex(0.025, g(0.025), 0.030, g(0.030), 0.035, g(0.035)) == Approx(0.0328).epsilon(1e-9));
+  CHECK(std::isnan(stats::parabola_vertex(0.0, 1.0, 1.0, 2.0, 2.0, 3.0)));  // collinear
+  CHECK(std::isnan(stats::parabola_vertex(1.0, 1.0, 1.0, 1.0, 2.0, 3.0)));  // two abscissae coincide
+}

@@ -88,7 +88,7 @@ Mat2 from_json(const nlohmann::json& m) {
 
 }  // namespace
 
-TEST_CASE("apparent truth: a neuromechanical session with its reflex on reports both truths; pem is on the apparent one",
+TEST_CASE("apparent truth: a neuromechanical session with its reflex on reports both truths - pem is on the apparent one",
           "[truth]") {
   const std::string dir = testutil::temp_dir("apparent_truth");
   const std::string log = simulate(dir + "/nm.lcm", true, true, true);

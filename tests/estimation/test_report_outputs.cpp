@@ -79,7 +79,7 @@ TEST_CASE("directional fit: recovers uᵀDu and uᵀKu exactly when the response
   }
 }
 
-TEST_CASE("per angle: directional impedance with intervals; the 2x2 flagged; the session 2x2 kept") {
+TEST_CASE("per angle: directional impedance with intervals - the 2x2 flagged - the session 2x2 kept") {
   auto design = testutil::small_design(40, 3);
   design.reps_per_angle = 3;  // the paper's design: 3 pushes per angle
   auto person = sim::table1_person();

@@ -608,7 +608,7 @@ TEST_CASE("can backend: operator FAULT_RESET clears a drive fault, re-enables th
   CHECK(s.faults.size() == 1);
 }
 
-TEST_CASE("can backend: a reset that cannot clear never does; a fault that needs a restart refuses the reset",
+TEST_CASE("can backend: a reset that cannot clear never does - a fault that needs a restart refuses the reset",
           "[can_backend][fault_reset]") {
   using manip::control::Mode;
   const auto cfg = rt_cfg();

@@ -137,7 +137,7 @@ TEST_CASE("logger: flushed by cycles as well as by wall-clock time", "[logger][h
   std::filesystem::remove(path);
 }
 
-TEST_CASE("logger: the log is locked for the session; a second instance is refused, the first intact",
+TEST_CASE("logger: the log is locked for the session - a second instance is refused, the first intact",
           "[logger][hardening]") {
   const std::string path = temp_path("locked.lcm");
   std::filesystem::remove(path);

@@ -400,7 +400,7 @@ TEST_CASE("neuromech: inverse then forward dynamics reproduces the minimum-jerk 
   }
 }
 
-TEST_CASE("neuromech: a zero-amplitude perturbation gives identical paired runs; runs are deterministic per seed") {
+TEST_CASE("neuromech: a zero-amplitude perturbation gives identical paired runs - runs are deterministic per seed") {
   NeuromechanicalArm arm(NeuromechParams{});  // the paper's configuration, with noise
   ReachSpec r;
   r.lateral_bow_m = 0.004;

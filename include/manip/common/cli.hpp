@@ -47,6 +47,11 @@ CLI::Option* add_out(CLI::App& app, std::string& out, const std::string& what);
 CLI::Option* add_force(CLI::App& app, bool& force);
 // --movements N, N in [min_n, max_n].
 CLI::Option* add_movements(CLI::App& app, int& n, int min_n, int max_n, const std::string& what);
+// --pulse-duration S, --pulse-amplitude N: the perturbation pulse of a
+// simulated session (defaults: the paper's 0.15 s, 15 N, §3.2), in the
+// ranges manip_rt's rt.yaml accepts (duration (0, 2] s; amplitude up to the
+// default safety.max_pert_amplitude_n, 30 N).
+void add_pulse(CLI::App& app, double& duration_s, double& amplitude_n);
 // --config FILE; the help names the default file and the search path.
 CLI::Option* add_config(CLI::App& app, std::string& config, const std::string& default_name, const std::string& what);
 

@@ -135,6 +135,10 @@ struct Conclusion {
   bool has_corrected = false;
   PlanarImpedance corrected;
   std::vector<Alternative> alternatives;
+  // What the session's protocol cannot show (empty: nothing to say): under a
+  // pulse of 100 ms or more a short-latency reflex is part of D, K within
+  // the window unless named (docs/diagnosis.md, "Pulse").
+  std::string protocol_note;
 };
 [[nodiscard]] Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarPrepared& prep);
 [[nodiscard]] std::string conclusion_text(const Conclusion& c, const Diagnosis& dg);

@@ -66,6 +66,13 @@ class Mechanism {
                                                                                  const Eigen::Matrix2d& /*k_npm*/) const {
     return {};
   }
+  // The D, K the next pass of the likelihood check simulates model_correction
+  // at, given the pass's reference (d0, k0) and the fit it gave (d1, k1,
+  // updated in place). Default: the fit itself. A mechanism whose correction
+  // copies the person's own D, K (the reflex) makes D, K a fixed point of the
+  // fit and steps to it (PlanarReflex).
+  virtual void next_reference(std::span<const double> /*setting*/, std::span<const double> /*gains*/, const Eigen::Matrix2d& /*d0*/,
+                              const Eigen::Matrix2d& /*k0*/, Eigen::Matrix2d& /*d1*/, Eigen::Matrix2d& /*k1*/) const {}
 };
 
 // Stretch reflex (Hammerstein: Kearney, Stein & Parameswaran 1997): half-wave

@@ -50,6 +50,11 @@ struct OneSidedT {
 // Holm (1979) step-down adjusted p-values (family-wise error control), same order as input.
 [[nodiscard]] std::vector<double> holm_adjust(std::span<const double> p);
 
+// Abscissa of the vertex of the parabola through (xa, fa), (xb, fb), (xc, fc)
+// (successive parabolic interpolation); NaN when the points are collinear or
+// two abscissae coincide.
+[[nodiscard]] double parabola_vertex(double xa, double fa, double xb, double fb, double xc, double fc);
+
 // Profile-likelihood interval of a one-parameter profile from the
 // least-squares parabola through its points (a, NLL): NLL(a) ≈ NLL_min +
 // c (a − a*)², and {a : 2 (NLL(a) − NLL_min) ≤ chi2_1(level)} =
