@@ -301,8 +301,12 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       // g_app is the reflex's share of the apparent impedance, g / (1 + g)
       // (manipulandum.cpp, PlanarReflex): g against the intrinsic D, K.
       const auto& share = lc.params.back().est;
-      auto g = [](double v) { return v / (1 - std::min(v, 0.9)); };
-      lc.params.push_back({"reflex_gain", "1", {g(share.value), g(share.lo), g(share.hi)}, -0.2, 1.5, true});
+      lc.params.push_back({"reflex_gain",
+                           "1",
+                           {reflex_intrinsic_gain(share.value), reflex_intrinsic_gain(share.lo), reflex_intrinsic_gain(share.hi)},
+                           -0.2,
+                           1.5,
+                           true});
     }
   };
   // The default method with the accepted corrections and the candidate's at
@@ -320,9 +324,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       auto next = fit_default_method(prep, &corr, trials, &f);
       if (!next.available || !next.has_likelihood) return next;
       f = std::move(next);
-      PemBaseline step = f;
-      if (c.model_based) c.mech->next_reference(c.setting, gains_scaled(c, a), ref.d, ref.k, step.d, step.k);
-      ref = std::move(step);
+      if (pass + 1 < passes(c)) {
+        PemBaseline step = f;
+        c.mech->next_reference(c.setting, gains_scaled(c, a), ref.d, ref.k, step.d, step.k);
+        ref = std::move(step);
+      }
     }
     return f;
   };

@@ -945,12 +945,7 @@ class PlanarReflex final : public Mechanism {
     d1 = (d1 + gain * d0 - gain * tau * (k0 - k)) / (1 + gain);
     k1 = k;
   }
-  // g = g_app / (1 − g_app); the profile's g_app stays below 0.75, and a
-  // share ≥ 1 would be a reflex without an intrinsic part.
-  static double intrinsic_gain(std::span<const double> g) {
-    const double share = g.empty() ? 0.0 : std::min(g[0], 0.9);
-    return share / (1 - share);
-  }
+  static double intrinsic_gain(std::span<const double> g) { return reflex_intrinsic_gain(g.empty() ? 0.0 : g[0]); }
   std::vector<std::vector<double>> grid(const Dataset& d) const override {
     std::vector<std::vector<double>> g;
     const auto step = std::max<long>(1, std::lround(0.001 / d.dt_s));
@@ -996,6 +991,11 @@ class TimeVaryingStiffness final : public Mechanism {
 };
 
 }  // namespace
+
+double reflex_intrinsic_gain(double share) {
+  share = std::min(share, 0.9);
+  return share / (1 - share);
+}
 
 std::vector<std::unique_ptr<Mechanism>> planar_library(int nuisance_order, bool with_time_varying) {
   auto v = planar_library(with_time_varying);

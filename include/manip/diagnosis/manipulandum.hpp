@@ -185,6 +185,11 @@ struct PlanarPrepared {
 // The same, each mechanism's columns projected like a dataset prepared with
 // PlanarOptions::nuisance_order (use the same order).
 [[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(int nuisance_order, bool with_time_varying = false);
+// The short-latency reflex's gain g against the intrinsic D, K from its share
+// of the apparent impedance g_app = g / (1 + g) (the library's gain_apparent):
+// g = g_app / (1 − g_app), the share capped at 0.9 (≥ 1 would be a reflex
+// without an intrinsic part).
+[[nodiscard]] double reflex_intrinsic_gain(double share);
 
 // D and K from a planar fit's parameter vector (first 7 entries: D11 D12 D21
 // D22 K11 K12 K22) plus the accepted mechanisms' corrections that belong to
