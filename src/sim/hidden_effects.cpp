@@ -19,6 +19,7 @@ constexpr Named kNames[] = {{"delay", HiddenMechanism::actuation_delay, 0.05},
                             {"friction", HiddenMechanism::stage_friction, 20.0},
                             {"handle", HiddenMechanism::handle_mass, 5.0},
                             {"reflex", HiddenMechanism::reflex, 3.0},
+                            {"feedback", HiddenMechanism::feedback, 3.0},
                             {"curl", HiddenMechanism::curl, 500.0},
                             {"sensor_lag", HiddenMechanism::sensor_lag, 0.02},
                             {"sensor_offset", HiddenMechanism::sensor_offset, 50.0},
@@ -37,8 +38,8 @@ HiddenEffect parse_hidden_effect(const std::string& text) {
   const auto colon = text.find(':');
   const std::string what = "--hidden '" + text + "'";
   if (colon == std::string::npos)
-    throw UsageError(what + ": expected MECHANISM:MAGNITUDE (delay:0.002, friction:1, handle:0.3, reflex:0.5, curl:40, "
-                     "sensor_lag:0.001, sensor_offset:2, sensor_drift:0.05)");
+    throw UsageError(what + ": expected MECHANISM:MAGNITUDE (delay:0.002, friction:1, handle:0.3, reflex:0.5, feedback:0.5, "
+                     "curl:40, sensor_lag:0.001, sensor_offset:2, sensor_drift:0.05)");
   const std::string name = text.substr(0, colon), value = text.substr(colon + 1);
   for (const auto& n : kNames) {
     if (name != n.name) continue;
@@ -56,7 +57,7 @@ HiddenEffect parse_hidden_effect(const std::string& text) {
     return HiddenEffect{n.m, v};
   }
   throw UsageError(what + ": unknown mechanism '" + name +
-                   "' (delay, friction, handle, reflex, curl, sensor_lag, sensor_offset, sensor_drift)");
+                   "' (delay, friction, handle, reflex, feedback, curl, sensor_lag, sensor_offset, sensor_drift)");
 }
 
 HiddenEffectHuman::HiddenEffectHuman(const LinearHumanParams& person, std::vector<HiddenEffect> effects,
@@ -72,24 +73,30 @@ HiddenEffectHuman::HiddenEffectHuman(const LinearHumanParams& person, std::vecto
       case HiddenMechanism::curl: curl_npm_ += (Mat2() << 0.0, e.magnitude, -e.magnitude, 0.0).finished(); break;
       case HiddenMechanism::stage_friction: break;  // in the plant (SessionDesign::hidden_stage_friction_n)
       case HiddenMechanism::reflex:
-        reflex_k_npm_ += e.magnitude * person.k_npm;
-        reflex_d_nspm_ += e.magnitude * person.d_nspm;
+      case HiddenMechanism::feedback: {
+        auto& c = delayed_[e.mechanism == HiddenMechanism::reflex ? 0 : 1];
+        c.k_npm += e.magnitude * person.k_npm;
+        c.d_nspm += e.magnitude * person.d_nspm;
         break;
+      }
       case HiddenMechanism::actuation_delay: break;  // in the plant (SessionDesign::actuation_delay_cycles)
       case HiddenMechanism::sensor_lag:              // in the force sensor (SessionDesign::hidden_sensor_*)
       case HiddenMechanism::sensor_offset:
       case HiddenMechanism::sensor_drift: break;
     }
   }
-  const auto n = static_cast<std::size_t>(std::max(1L, std::lround(draw.reflex_delay_s / plant_step_s)));
-  delay_.assign(n, {0.0, 0.0, 0.0, 0.0});
+  const double delay_s[2] = {draw.reflex_delay_s, draw.feedback_delay_s};
+  for (std::size_t i = 0; i < delayed_.size(); ++i)
+    delayed_[i].ring.assign(static_cast<std::size_t>(std::max(1L, std::lround(delay_s[i] / plant_step_s))), {0.0, 0.0, 0.0, 0.0});
 }
 
 void HiddenEffectHuman::begin_trial(const ReachSpec& reach, std::uint64_t seed) {
   inner_.begin_trial(reach, seed);
   reach_ = reach;
-  for (auto& d : delay_) d = {0.0, 0.0, 0.0, 0.0};
-  head_ = 0;
+  for (auto& c : delayed_) {
+    for (auto& d : c.ring) d = {0.0, 0.0, 0.0, 0.0};
+    c.head = 0;
+  }
 }
 
 void HiddenEffectHuman::endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) {
@@ -100,19 +107,22 @@ void HiddenEffectHuman::endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) {
                                reach_.lateral_bow_m, inner_.time_s());
     h_n += curl_npm_ * (plan.x - x);
   }
-  if (!reflex_k_npm_.isZero()) {
-    const auto& old = delay_[head_];  // oldest entry: the error one reflex delay ago
-    h_n += reflex_k_npm_ * Vec2(old[0], old[1]) + reflex_d_nspm_ * Vec2(old[2], old[3]);
+  for (const auto& c : delayed_) {
+    if (c.k_npm.isZero()) continue;
+    const auto& old = c.ring[c.head];  // oldest entry: the error one delay ago
+    h_n += c.k_npm * Vec2(old[0], old[1]) + c.d_nspm * Vec2(old[2], old[3]);
   }
 }
 
 void HiddenEffectHuman::advance(double dt_s, const Vec2& xdd_hand_mps2) {
-  if (!reflex_k_npm_.isZero()) {
+  if (!delayed_[0].k_npm.isZero() || !delayed_[1].k_npm.isZero()) {
     const auto plan = min_jerk(reach_.start_shoulder_m, reach_.goal_shoulder_m, reach_.t_start_s, reach_.duration_s,
                                reach_.lateral_bow_m, inner_.time_s());
     const Vec2 e = plan.x - inner_.hand_position_m(), ed = plan.xd - inner_.hand_velocity_mps();
-    delay_[head_] = {e.x(), e.y(), ed.x(), ed.y()};
-    head_ = (head_ + 1) % delay_.size();
+    for (auto& c : delayed_) {
+      c.ring[c.head] = {e.x(), e.y(), ed.x(), ed.y()};
+      c.head = (c.head + 1) % c.ring.size();
+    }
   }
   inner_.advance(dt_s, xdd_hand_mps2);
 }
@@ -125,6 +135,7 @@ HiddenSession make_hidden_session(const SessionDesign& base, const LinearHumanPa
   hs.draw.session_seed = rng.next() % 1000000007ull + 1;
   hs.draw.impedance_scale = 0.85 + 0.30 * rng.uniform();
   hs.draw.reflex_delay_s = 0.025 + 0.010 * rng.uniform();
+  hs.draw.feedback_delay_s = 0.060 + 0.040 * rng.uniform();  // after the other draws: they stay as they were
   LinearHumanParams person = person0;
   person.d_nspm *= hs.draw.impedance_scale;
   person.k_npm *= hs.draw.impedance_scale;

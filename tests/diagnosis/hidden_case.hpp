@@ -143,6 +143,13 @@ inline std::string show(const Matrix2d& m) {
 }
 
 
+// Hidden feedback the extension separates from the intrinsic part (the
+// reflex, the early feedback): the corrected D, K are checked against the
+// intrinsic truth, every other mechanism's against the apparent truth.
+inline bool separates_feedback(const sim::HiddenEffect& e) {
+  return e.mechanism == sim::HiddenMechanism::reflex || e.mechanism == sim::HiddenMechanism::feedback;
+}
+
 // The main parameter of each mechanism and its true value.
 struct MainParam {
   std::string id, param;
@@ -155,6 +162,7 @@ inline MainParam main_param_of(const sim::HiddenEffect& e, const sim::HiddenDraw
     case sim::HiddenMechanism::stage_friction: return {"stage_friction", "F_coulomb", e.magnitude};
     case sim::HiddenMechanism::handle_mass: return {"handle_mass", "handle_extra", e.magnitude};
     case sim::HiddenMechanism::reflex: return {"short_latency_reflex", "delay", draw.reflex_delay_s};
+    case sim::HiddenMechanism::feedback: return {"early_feedback", "delay", draw.feedback_delay_s};
     case sim::HiddenMechanism::curl: return {"curl_stiffness", "curl_c", e.magnitude};
     case sim::HiddenMechanism::sensor_lag: return {"force_sensor_lag", "sensor_lag", e.magnitude};
     // Offset and drift have no mechanism (removed by the isolation; docs/diagnosis.md).
@@ -188,6 +196,33 @@ inline double check_main_param(const sim::HiddenEffect& e, const Outcome& o) {
   return v;
 }
 
+// A hidden delayed copy (the reflex, the early feedback) and what its
+// extension separates: named first, its delay within 20 % with a positive
+// held-out gain, its gain against the intrinsic D, K (`gain_name`) within
+// `gain_tol` of the hidden magnitude, the corrected K and D within `k_tol`
+// and `d_tol` of the intrinsic truth (relative Frobenius errors).
+inline void check_delayed_copy(const Case& c, const Outcome& o, const std::string& gain_name, double gain_tol, double k_tol, double d_tol) {
+  const auto& e = c.effects.front();
+  const auto id = main_param_of(e, o.draw, 4000.0).id;
+  INFO("named: " << (o.concl.named.empty() ? "none" : o.concl.named.front()) << ", hidden " << sim::to_string(e));
+  REQUIRE_FALSE(o.concl.named.empty());
+  CHECK(o.concl.named.front() == id);
+  check_main_param(e, o);
+  const auto* f = o.named_fit(id);
+  REQUIRE(f);
+  double g = NAN;
+  for (const auto& p : f->params)
+    if (p.name == gain_name) g = p.est.value;
+  INFO(gain_name << " " << g);
+  CHECK(std::fabs(rel(g, e.magnitude)) < gain_tol);
+  REQUIRE(o.concl.has_corrected);
+  const auto& z = o.concl.corrected;
+  INFO("K after " << show(z.k) << ", plain pem " << show(o.pem.k) << ", intrinsic " << show(o.k_intr) << "; D after " << show(z.d)
+                  << ", intrinsic " << show(o.d_intr));
+  CHECK(frob(z.k, o.k_intr) < k_tol);
+  CHECK(frob(z.d, o.d_intr) < d_tol);
+}
+
 inline void check_named(const Case& c, const Outcome& o) {
   const auto& e = c.effects.front();
   const auto mp = main_param_of(e, o.draw, 4000.0);
@@ -197,8 +232,8 @@ inline void check_named(const Case& c, const Outcome& o) {
   REQUIRE_FALSE(o.concl.named.empty());
   CHECK(o.concl.named.front() == mp.id);
   check_main_param(e, o);
-  const bool reflex = e.mechanism == sim::HiddenMechanism::reflex;
-  const Matrix2d kt = reflex ? o.k_intr : o.k_app, dt = reflex ? o.d_intr : o.d_app;
+  const bool delayed = separates_feedback(e);
+  const Matrix2d kt = delayed ? o.k_intr : o.k_app, dt = delayed ? o.d_intr : o.d_app;
   REQUIRE(o.concl.has_corrected);
   const auto& z = o.concl.corrected;
   INFO("K after " << show(z.k) << " truth " << show(kt) << "; D after " << show(z.d) << " truth " << show(dt));

@@ -42,7 +42,7 @@ Limit limit_of(const Outcome& o, const sim::HiddenEffect& e) {
   std::string gain = mp.param;
   Limit l;
   l.truth = mp.truth;
-  if (e.mechanism == sim::HiddenMechanism::reflex) {  // its main parameter is a shape (the delay); the limit is on its gain
+  if (separates_feedback(e)) {  // its main parameter is a shape (the delay); the limit is on its gain
     gain = "gain_apparent";                             // relative to the apparent D, K ≈ (1 + g) × intrinsic
     l.truth = e.magnitude / (1.0 + e.magnitude);
   }
@@ -328,6 +328,16 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 K is named, delay withi
   check_named(c, run_case(c));
 }
 
+// The early feedback at the middle magnitude with realistic noise, seed 1
+// (delay 90.8 ms): named first, but its delay 69.6 ms (−23 %) and gain 0.66
+// trade against D, K in the window, and the corrected K11 is 24 % below the
+// intrinsic (docs/diagnosis.md, "Early feedback"; the study gives the rates).
+TEST_CASE("manipulandum: hidden early feedback 1.0 K is named, delay within 20 %, D and K after the extension", "[.known-miss]") {
+  Case c;
+  c.effects = {sim::parse_hidden_effect("feedback:1")};
+  check_named(c, run_case(c));
+}
+
 // What the session does show of a reflex (docs/diagnosis.md, "The
 // short-latency reflex in a 150 ms window"): with the corrections simulated
 // from the model, the reflex itself is significant, its gain on a ridge with
@@ -358,33 +368,81 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 K -> the reflex signifi
     }
 }
 
-// The reflex's model-based correction copies the fit's own D, K, so the
-// person's D, K are the fixed point of "fit at the copy" (manipulandum.cpp,
-// PlanarReflex). To first order (Δx(t − τ) ≈ Δx − τ Δẋ) the fit at a copy
-// (D0, K0) returns K1 = (1 + g) K − g K0 and D1 = (1 + g) D − g D0 + g τ (K0 − K);
-// one step of next_reference from any (D0, K0) must land on D, K.
-TEST_CASE("manipulandum: the reflex's next reference is the fixed point of a fit affine in the copied D, K") {
+// Within the window the delayed signals project on the undelayed ones:
+// for Δx = sin ωt, Δx(t − τ) = cos ωτ Δx − (sin ωτ / ω) Δẋ and
+// Δẋ(t − τ) = ω sin ωτ Δx + cos ωτ Δẋ exactly, except over the first τ, where
+// the delayed signal is 0 (before onset); 40 periods make that a ~1 % effect.
+TEST_CASE("manipulandum: delayed_projection of a sinusoid is the analytic shift") {
+  Dataset d;
+  d.dt_s = 0.00025;
+  const double w = 2 * std::numbers::pi * 5.0, tau = 0.080;
+  PlanarTrial p;
+  for (std::size_t k = 0; k < 32000; ++k) {  // 8 s: 40 periods
+    const double t = static_cast<double>(k) * d.dt_s;
+    p.dx.emplace_back(std::sin(w * t), 0.5 * std::sin(w * t));
+    p.dxd.emplace_back(w * std::cos(w * t), 0.5 * w * std::cos(w * t));
+  }
+  d.planar.push_back(p);
+  const auto pr = delayed_projection(d, tau);
+  CHECK(pr.a_x == Approx(std::cos(w * tau)).margin(0.02));
+  CHECK(pr.b_x == Approx(-std::sin(w * tau) / w).margin(0.02 / w));
+  CHECK(pr.a_v == Approx(w * std::sin(w * tau)).margin(0.02 * w));
+  CHECK(pr.b_v == Approx(std::cos(w * tau)).margin(0.02));
+  // τ = 0: the identity.
+  const auto p0 = delayed_projection(d, 0.0);
+  CHECK(p0.a_x == Approx(1.0));
+  CHECK(p0.b_v == Approx(1.0));
+  CHECK(std::fabs(p0.b_x) < 1e-9);
+  CHECK(std::fabs(p0.a_v) < 1e-6);
+}
+
+// The delayed copies' model-based correction copies the fit's own D, K, so
+// the person's D, K are the fixed point of "fit at the copy" (manipulandum.cpp,
+// PlanarReflex). With the window's projection (a_x, b_x, a_v, b_v) the fit at
+// a copy (D0, K0) returns K1 = K + g a_x (K − K0) + g a_v (D − D0) and
+// D1 = D + g b_v (D − D0) + g b_x (K − K0); one step of next_reference from
+// any (D0, K0) must land on D, K, for the reflex and the early feedback.
+TEST_CASE("manipulandum: the delayed copies' next reference is the fixed point of a fit affine in the copied D, K") {
   const auto lib = planar_library();
-  const Mechanism* reflex = find_mechanism(lib, "short_latency_reflex");
-  REQUIRE(reflex);
-  Matrix2d d, k, d0, k0;
-  d << 12.0, -3.0, -3.0, 8.0;
-  k << 150.0, -60.0, -60.0, 340.0;
-  d0 << 20.0, -7.0, -7.0, 15.0;      // the baseline's apparent D, K: the starting copy
+  Dataset d;
+  d.dt_s = 0.00025;
+  PlanarTrial p;
+  for (std::size_t k = 0; k < 601; ++k) {  // a step response's shape over the 150 ms window
+    const double t = static_cast<double>(k) * d.dt_s, e = std::exp(-t / 0.05);
+    p.dx.emplace_back(0.01 * (1 - e * (1 + t / 0.05)), -0.004 * (1 - e * (1 + t / 0.05)));
+    p.dxd.emplace_back(0.01 * t / (0.05 * 0.05) * e, -0.004 * t / (0.05 * 0.05) * e);
+  }
+  d.planar.push_back(p);
+  Matrix2d d_true, k_true, d0, k0;
+  d_true << 12.0, -3.0, -3.0, 8.0;
+  k_true << 150.0, -60.0, -60.0, 340.0;
+  d0 << 20.0, -7.0, -7.0, 15.0;  // the baseline's apparent D, K: the starting copy
   k0 << 420.0, -150.0, -150.0, 900.0;
-  const double share = 0.4, g = share / (1 - share), tau = 0.031;
-  const std::vector<double> setting{tau}, gains{share};
-  Matrix2d k1 = (1 + g) * k - g * k0, d1 = (1 + g) * d - g * d0 + g * tau * (k0 - k);
-  reflex->next_reference(setting, gains, d0, k0, d1, k1);
-  CHECK((k1 - k).norm() < 1e-9 * k.norm());
-  CHECK((d1 - d).norm() < 1e-9 * d.norm());
+  const double share = 0.4, g = share / (1 - share);
+  const std::vector<double> gains{share};
+  for (const auto& [id, tau] : {std::pair<std::string, double>{"short_latency_reflex", 0.031}, {"early_feedback", 0.090}}) {
+    INFO(id);
+    const Mechanism* m = find_mechanism(lib, id);
+    REQUIRE(m);
+    const auto pr = delayed_projection(d, tau);
+    const std::vector<double> setting{tau};
+    Matrix2d k1 = k_true + g * pr.a_x * (k_true - k0) + g * pr.a_v * (d_true - d0);
+    Matrix2d d1 = d_true + g * pr.b_v * (d_true - d0) + g * pr.b_x * (k_true - k0);
+    m->next_reference(d, setting, gains, d0, k0, d1, k1);
+    CHECK((k1 - k_true).norm() < 1e-9 * k_true.norm());
+    CHECK((d1 - d_true).norm() < 1e-9 * d_true.norm());
+  }
+  // For a short delay the projection is the first-order shift Δx(t − τ) ≈ Δx − τ Δẋ.
+  const auto ps = delayed_projection(d, 0.002);
+  CHECK(ps.a_x == Approx(1.0).margin(0.02));
+  CHECK(ps.b_x == Approx(-0.002).margin(0.0002));
   // Other mechanisms keep the fit as the next reference.
   const Mechanism* handle = find_mechanism(lib, "handle_mass");
   REQUIRE(handle);
-  Matrix2d dd = d, kk = k;
-  handle->next_reference({}, gains, d0, k0, dd, kk);
-  CHECK(dd == d);
-  CHECK(kk == k);
+  Matrix2d dd = d_true, kk = k_true;
+  handle->next_reference(d, {}, gains, d0, k0, dd, kk);
+  CHECK(dd == d_true);
+  CHECK(kk == k_true);
 }
 
 // With a short pulse the same reflex is named (docs/diagnosis.md, "Pulse"):
@@ -401,24 +459,35 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 with a 50 ms, 20 N puls
   c.pulse_s = 0.05;
   c.pulse_n = 20.0;
   const auto o = run_case(c);
-  INFO("named: " << (o.concl.named.empty() ? "none" : o.concl.named.front()));
-  REQUIRE_FALSE(o.concl.named.empty());
-  CHECK(o.concl.named.front() == "short_latency_reflex");
-  check_main_param(c.effects.front(), o);
-  const auto* f = o.named_fit("short_latency_reflex");
-  REQUIRE(f);
-  double g = NAN;
-  for (const auto& p : f->params)
-    if (p.name == "reflex_gain") g = p.est.value;
-  INFO("reflex gain " << g << " (hidden 0.5)");
-  CHECK(std::fabs(rel(g, 0.5)) < 0.30);
-  REQUIRE(o.concl.has_corrected);
-  const auto& z = o.concl.corrected;
-  INFO("K after " << show(z.k) << ", plain pem " << show(o.pem.k) << ", intrinsic " << show(o.k_intr) << "; D after " << show(z.d)
-                  << ", intrinsic " << show(o.d_intr));
-  CHECK(frob(z.k, o.k_intr) < 0.15);
-  CHECK(frob(z.d, o.d_intr) < 0.20);
+  check_delayed_copy(c, o, "reflex_gain", 0.30, 0.15, 0.20);
   CHECK(frob(o.pem.k, o.k_intr) > 0.30);
+}
+
+// Feedback earlier than the model's T_est (docs/diagnosis.md, "Early
+// feedback"): a delayed copy of the person's D, K at 60-100 ms. Noise-free,
+// so the test checks the mechanism and its fixed point rather than the
+// session's power (with realistic noise it is named in the study's share of
+// sessions): named first, its delay within 20 %, and the corrected D, K on
+// the intrinsic truth where the plain `pem` holds the feedback. Measured on
+// hidden seed 1 (delay 90.8 ms): delay 97.9 ms, K and D within 1.5 % of the
+// intrinsic truth, the apparent K11 22 % above it (noise-free, the plain
+// `pem` K is within 1.3 % of the intrinsic one: without noise its fit of the
+// whole response does not take the feedback into K, as it does with realistic
+// noise, +25 % on the same seed); the gain 0.67 against the hidden
+// 0.5 (+34 %, hence 40 % here): a longer delay with a larger gain leaves
+// nearly the same response in the window.
+TEST_CASE("manipulandum: hidden early feedback 0.5 at 60-100 ms, noise-free, is named - the intrinsic D, K recovered") {
+  Case c;
+  c.effects = {sim::parse_hidden_effect("feedback:0.5")};
+  c.noise = sim::parse_noise_level("none");
+  // Noise-free `pem` fits converge ~20× slower than realistic ones (this
+  // session: 139 s for diagnose_model, 5.5 s with realistic noise): 3
+  // held-out folds, 114 s on the idle machine (10 folds: 220 s in the -j2 suite).
+  c.heldout_folds = 3;
+  const auto o = run_case(c);
+  check_delayed_copy(c, o, "feedback_gain", 0.40, 0.05, 0.05);
+  // The feedback is in the window: the apparent K holds it (+20 % on K11).
+  CHECK(frob(o.k_app, o.k_intr) > 0.05);
 }
 
 // The conclusion's alternative to a named inertia reduction: the reflex gain
@@ -557,7 +626,7 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
   const std::uint64_t first_seed = fs ? std::strtoull(fs, nullptr, 10) : 5000;
   std::vector<std::string> cells = {"none",         "delay:0.001",  "delay:0.002", "delay:0.004", "friction:0.5",
                                     "friction:1",   "friction:2",   "handle:0.15", "handle:0.3",  "handle:0.6",
-                                    "reflex:0.25",  "reflex:0.5",   "reflex:1",    "curl:20",     "curl:40",
+                                    "reflex:0.25",  "reflex:0.5",   "reflex:1",    "feedback:0.5", "feedback:1", "feedback:1.5", "curl:20",     "curl:40",
                                     "curl:80",      "sensor_lag:0.0015", "sensor_lag:0.003", "sensor_lag:0.006",
                                     "delay:0.002+friction:1", "curl:40+handle:0.3"};
   const char* rp = std::getenv("MANIP_MSTUDY_REPS");  // perturbed repetitions per angle (default 3: 24 perturbed trials)
@@ -594,8 +663,8 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
       // fits; there only the "held-out gain > 0" column depends on it).
       c.heldout_folds = eff.size() > 1 ? -1 : 5;
       const auto o = run_case(c);
-      const bool reflex = !eff.empty() && eff.front().mechanism == sim::HiddenMechanism::reflex;
-      Matrix2d kt = reflex ? o.k_intr : o.k_app, dt = reflex ? o.d_intr : o.d_app;
+      const bool delayed = !eff.empty() && separates_feedback(eff.front());
+      Matrix2d kt = delayed ? o.k_intr : o.k_app, dt = delayed ? o.d_intr : o.d_app;
       const Matrix2d k = o.concl.has_corrected ? o.concl.corrected.k : o.pem.k;
       const Matrix2d dd = o.concl.has_corrected ? o.concl.corrected.d : o.pem.d;
       if (worst_diag(k, kt) < 0.10) ++kok;

@@ -152,7 +152,7 @@ TEST_CASE("planar sensor: the lag's model correction against the exact discretis
     INFO(m->id());
     const std::string id = m->id();
     CHECK(has == (id == "force_sensor_lag" || id == "handle_mass" || id == "wrong_segment_inertia" || id == "curl_stiffness" ||
-                  id == "short_latency_reflex"));
+                  id == "short_latency_reflex" || id == "early_feedback"));
   }
 }
 

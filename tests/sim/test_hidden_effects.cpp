@@ -71,6 +71,7 @@ TEST_CASE("hidden effects: parse MECHANISM:MAGNITUDE, refuse bad text with a mes
   CHECK(parse_hidden_effect("delay:0.002").mechanism == HiddenMechanism::actuation_delay);
   CHECK(parse_hidden_effect("friction:1").mechanism == HiddenMechanism::stage_friction);
   CHECK(parse_hidden_effect("reflex:0.5").mechanism == HiddenMechanism::reflex);
+  CHECK(parse_hidden_effect("feedback:0.5").mechanism == HiddenMechanism::feedback);
   CHECK(parse_hidden_effect("curl:40").mechanism == HiddenMechanism::curl);
   for (const char* bad : {"handle", "handle:", "handle:abc", "handle:0.3x", "mass:0.3", "delay:2", "curl:-40", "curl:nan"}) {
     INFO(bad);
@@ -126,6 +127,17 @@ TEST_CASE("hidden effects: each mechanism shifts the default (pem) estimate the 
     INFO("reflex: D " << show(h.d) << " K " << show(h.k));
     CHECK(rel(h.d, clean.d, 1, 1) < -0.1);
     CHECK(std::abs(rel(h.k, clean.k, 0, 0)) > 0.2);
+  }
+  SECTION("early feedback 1.0 K at 60-100 ms: the apparent K holds it, the intrinsic truth does not move") {
+    const auto h = run({parse_hidden_effect("feedback:1")}, seed);
+    INFO("feedback: D " << show(h.d) << " K " << show(h.k));
+    CHECK((h.k_true - clean.k_true).norm() < 1e-9);  // the person's own D, K
+    // A delayed copy g [D Δẋ + K Δx](t − τ) acting for the last 50-90 ms of
+    // the window: the constant K that fits the window grows (hidden seed 1,
+    // 100 movements: K11 +46 % over the intrinsic).
+    REQUIRE((h.apparent && clean.apparent));
+    CHECK(h.apparent->k_npm(0, 0) > 1.15 * clean.apparent->k_npm(0, 0));
+    CHECK(h.apparent->k_npm(1, 1) > 1.05 * clean.apparent->k_npm(1, 1));
   }
   SECTION("curl 40 N/m: K12 error positive (relative to a negative K12: more negative)") {
     const auto h = run({parse_hidden_effect("curl:40")}, seed);

@@ -191,6 +191,16 @@ struct PlanarPrepared {
 // without an intrinsic part).
 [[nodiscard]] double reflex_intrinsic_gain(double share);
 
+// Least-squares projection of the delayed variational signals onto the
+// undelayed ones over the window (all planar trials, both axes):
+// Δx(t − τ) ≈ a_x Δx + b_x Δẋ, Δẋ(t − τ) ≈ a_v Δx + b_v Δẋ. The fit of
+// D, K absorbs a delayed force term along these (the delayed copies' fixed
+// point, PlanarReflex::next_reference). Default (no data): τ = 0.
+struct DelayedProjection {
+  double a_x = 1.0, b_x = 0.0, a_v = 0.0, b_v = 1.0;
+};
+[[nodiscard]] DelayedProjection delayed_projection(const Dataset& d, double tau_s);
+
 // D and K from a planar fit's parameter vector (first 7 entries: D11 D12 D21
 // D22 K11 K12 K22) plus the accepted mechanisms' corrections that belong to
 // the impedance (curl: K12 += c, K21 −= c).

@@ -71,8 +71,18 @@ class Mechanism {
   // updated in place). Default: the fit itself. A mechanism whose correction
   // copies the person's own D, K (the reflex) makes D, K a fixed point of the
   // fit and steps to it (PlanarReflex).
-  virtual void next_reference(std::span<const double> /*setting*/, std::span<const double> /*gains*/, const Eigen::Matrix2d& /*d0*/,
-                              const Eigen::Matrix2d& /*k0*/, Eigen::Matrix2d& /*d1*/, Eigen::Matrix2d& /*k1*/) const {}
+  virtual void next_reference(const Dataset& /*data*/, std::span<const double> /*setting*/, std::span<const double> /*gains*/,
+                              const Eigen::Matrix2d& /*d0*/, const Eigen::Matrix2d& /*k0*/, Eigen::Matrix2d& /*d1*/,
+                              Eigen::Matrix2d& /*k1*/) const {}
+  // A parameter the report derives from the last gain by a monotone
+  // increasing map (the delayed copies' gain g against the intrinsic D, K
+  // from their share of the apparent impedance), so its interval is the
+  // gain's interval mapped. from_gain null: none.
+  struct DerivedGain {
+    ParamInfo info{};
+    double (*from_gain)(double) = nullptr;
+  };
+  [[nodiscard]] virtual DerivedGain derived_gain() const { return {}; }
 };
 
 // Stretch reflex (Hammerstein: Kearney, Stein & Parameswaran 1997): half-wave

@@ -17,6 +17,12 @@
 //                   intrinsic stiffness (and MAG times its damping) on the
 //                   deviation from the plan delayed by 30 ms (randomised in
 //                   [25, 35] ms by the hidden seed).
+//   feedback:MAG    feedback earlier than the model's δ_v,dev = T_est (paper
+//                   §2, eq. 4-6: a long-latency reflex or an early voluntary
+//                   reaction inside the window): MAG times the person's
+//                   intrinsic K and D on the deviation from the plan delayed by
+//                   80 ms (randomised in [60, 100] ms by the hidden seed; the
+//                   paper's neuromechanical feedback delay δ_s is 60 ms, §4).
 //   curl:MAG_Npm    antisymmetric (curl) stiffness [0 MAG; -MAG 0] on the
 //                   deviation from the plan (heteronymous reflexes, paper §3.3).
 //   sensor_lag:MAG_s     the handle force sensor's reading is its force through a
@@ -46,6 +52,7 @@ enum class HiddenMechanism {
   stage_friction,
   handle_mass,
   reflex,
+  feedback,
   curl,
   sensor_lag,
   sensor_offset,
@@ -57,7 +64,7 @@ struct HiddenEffect {
   double magnitude{0.0};  // SI: s, N, kg, fraction of K, N/m (sensor: s, N, N/s)
 };
 
-// "delay:0.002", "friction:1", "handle:0.3", "reflex:0.5", "curl:40",
+// "delay:0.002", "friction:1", "handle:0.3", "reflex:0.5", "feedback:0.5", "curl:40",
 // "sensor_lag:0.001", "sensor_offset:2", "sensor_drift:0.05".
 // Throws manip::UsageError naming the text and what is wrong.
 HiddenEffect parse_hidden_effect(const std::string& text);
@@ -70,9 +77,10 @@ struct HiddenDraw {
   double impedance_scale{1.0};   // person's D and K multiplied by this
   double reflex_delay_s{0.030};
   int actuation_delay_cycles{0};
+  double feedback_delay_s{0.080};
 };
 
-// A person with the hidden person-side effects (reflex, curl) added to the
+// A person with the hidden person-side effects (reflex, feedback, curl) added to the
 // force it produces. The apparatus effects (delay, friction, handle mass, force sensor) are
 // in the plant (SessionDesign hooks, set by make_hidden_session), so the
 // apparent truth (truth.hpp) stays the person's. Forwards the intrinsic truth
@@ -94,10 +102,15 @@ class HiddenEffectHuman final : public HumanModel, public TruthSource {
  private:
   LinearImpedanceHuman inner_;
   ReachSpec reach_;
+  // g [K e + D ė](t − τ) on the deviation e from the plan: the reflex and the
+  // early feedback, each with its own delay line of (e, ė) at the plant step.
+  struct DelayedCopy {
+    Mat2 k_npm{Mat2::Zero()}, d_nspm{Mat2::Zero()};
+    std::vector<std::array<double, 4>> ring;
+    std::size_t head{0};
+  };
   Mat2 curl_npm_{Mat2::Zero()};
-  Mat2 reflex_k_npm_{Mat2::Zero()}, reflex_d_nspm_{Mat2::Zero()};
-  std::vector<std::array<double, 4>> delay_;  // ring of (e, ed) for the reflex
-  std::size_t head_{0};
+  std::array<DelayedCopy, 2> delayed_;  // reflex, feedback
 };
 
 // Builds the design and the person of one hidden session: `base` (movements,
