@@ -795,7 +795,8 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
     if (!dg.rounds.empty())
       for (const auto& cs : dg.rounds.front().candidates) {
         if (cs.gain_mde.size() != 1) continue;  // one-gain mechanisms: one number says it
-        o << " " << cs.params.back().name << " " << g4(cs.gain_mde.front()) << " " << cs.params.back().unit << ";";
+        // The mechanism named too: the two delayed copies share the gain's name.
+        o << " " << cs.id << " " << cs.params.back().name << " " << g4(cs.gain_mde.front()) << " " << cs.params.back().unit << ";";
       }
     o << "\n";
     if (!c.protocol_note.empty()) o << "  Not visible: " << c.protocol_note << "\n";
