@@ -994,8 +994,8 @@ class PlanarReflex final : public Mechanism {
   // a_v = 0 (first order): K = (K1 + g K0)/(1 + g). Under the paper's pulse
   // it is far off (hidden session, seed 1): at 30 ms a_x 0.77, b_x −0.015 s,
   // a_v 14 1/s, b_v 0.04; at 60 ms a_x 0.31; at 90 ms 0.05. Stepping with
-  // the first order overshot: hidden feedback 2.0, corrected K11 −195 %
-  // (docs/diagnosis.md, "Early feedback").
+  // the first order overshot: hidden feedback 1.0 fitted at 60 ms, corrected
+  // K11 −20 N/m against an intrinsic 107 (docs/diagnosis.md, "Early feedback").
   void next_reference(const Dataset& d, std::span<const double> s, std::span<const double> g, const Matrix2d& d0, const Matrix2d& k0,
                       Matrix2d& d1, Matrix2d& k1) const override {
     const double gain = intrinsic_gain(g), tau = s.empty() ? spec_.profile.front() : s[0];
