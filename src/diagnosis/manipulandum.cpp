@@ -894,7 +894,8 @@ DelayedProjection delayed_projection(const Dataset& d, double tau_s) {
       }
   DelayedProjection out;
   if (!(g.determinant() > 0)) return out;
-  const Eigen::Vector2d cx = g.ldlt().solve(rx), cv = g.ldlt().solve(rv);
+  const auto gram = g.ldlt();
+  const Eigen::Vector2d cx = gram.solve(rx), cv = gram.solve(rv);
   out.a_x = cx(0);
   out.b_x = cx(1);
   out.a_v = cv(0);
