@@ -87,6 +87,10 @@ int run(int argc, char** argv) {
   int poly_order = 1;
   bool time_varying = false;
   app.add_flag("--time-varying", time_varying, "manipulandum: add the time-varying-stiffness mechanism to the library (off by default: confounded with inertia terms in a 150 ms window)");
+  bool directional = false;
+  app.add_flag("--directional-reflex", directional,
+               "manipulandum: add the direction-dependent reflex (one muscle group, acting only when stretched) to the library (off by "
+               "default: it also fits a residual common to all trials along the reach)");
   app.add_option("--poly-order", poly_order, "manipulandum: per-trial nuisance polynomial projected out (-1 none; default 1)")->check(CLI::Range(-1, 8));
   double t_est = 0.15;
   app.add_flag("--no-default-method", no_pem, "manipulandum: do not fit the estimator's default method (pem) for comparison");
@@ -137,6 +141,7 @@ int run(int argc, char** argv) {
     po.estimator.pipeline.t_est_s = t_est;
     po.pem_baseline = !no_pem;
     po.nuisance_order = poly_order;
+    po.directional_reflex = directional;
     const auto run = diagnosis::run_planar(sessions, po, eo, time_varying);
     const auto& prep = run.prep;
     const auto& res = run.dg;

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <numbers>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -67,9 +68,9 @@ static int run(int argc, char** argv) {
   cli::add_force(app, c.force)->description("replace existing output files (--out and --key)");
   app.add_option("--hidden", hidden,
                  "MECHANISM:MAGNITUDE, SI units, repeatable: delay:0.002 (s) | friction:1 (N) | handle:0.3 (kg) | "
-                 "reflex:0.5 (x intrinsic K, D; 25-35 ms) | feedback:0.5 (x intrinsic K, D; 60-100 ms) | curl:40 (N/m) | sensor_lag:0.001 (s, first-order low pass of the "
+                 "reflex:0.5 (x intrinsic K, D; 25-35 ms) | feedback:0.5 (x intrinsic K, D; 60-100 ms) | reflex_dir:1 (x intrinsic K, D along one direction, only when stretched; 25-35 ms) | curl:40 (N/m) | sensor_lag:0.001 (s, first-order low pass of the "
                  "force sensor) | sensor_offset:2 (N) | sensor_drift:0.05 (N/s). None: a clean session");
-  app.add_option("--hidden-seed", hidden_seed, "draw of the session seed, impedance scale, reflex and feedback delays (default 1)");
+  app.add_option("--hidden-seed", hidden_seed, "draw of the session seed, impedance scale, reflex and feedback delays, reflex direction (default 1)");
   app.add_option("--noise", noise, cli::join(kNoise) + " (default realistic)")->check(cli::one_of(kNoise));
   cli::add_movements(app, c.movements, 1, 100000, "number of movements");
   app.add_option("--reps", reps, "perturbed repetitions per angle (default 3)")->check(CLI::Range(1, 1000));
@@ -108,7 +109,8 @@ static int run(int argc, char** argv) {
   for (const auto& e : effects) what << " " << to_string(e);
   what << "; hidden seed " << hidden_seed << ": session seed " << hs.draw.session_seed << ", impedance scale "
        << hs.draw.impedance_scale << ", reflex delay " << hs.draw.reflex_delay_s * 1000 << " ms, feedback delay "
-       << hs.draw.feedback_delay_s * 1000 << " ms, actuation delay "
+       << hs.draw.feedback_delay_s * 1000 << " ms, reflex direction " << hs.draw.reflex_direction_rad * 180.0 / std::numbers::pi
+       << " deg, actuation delay "
        << hs.draw.actuation_delay_cycles << " cycles\n";
   // The outputs: written next to their targets and renamed when complete,
   // so an existing file is never truncated; without --force an existing

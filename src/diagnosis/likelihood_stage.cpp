@@ -46,7 +46,9 @@ struct Profile {
   // when the profile is not convex around its best points).
   double half_width = std::numeric_limits<double>::quiet_NaN();
 };
-Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaseline& fit0) {
+// alpha_min: the amplitude's lower bound (a one-sided mechanism's negative
+// amplitude is its opposite direction, profiled on its own).
+Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaseline& fit0, double alpha_min = -2.0) {
   Profile out;
   std::vector<std::pair<double, PemBaseline>> pts = {{0.0, fit0}};
   auto at = [&](double a) {
@@ -54,7 +56,7 @@ Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaselin
     pts.emplace_back(a, eval(a));
   };
   at(1.0);
-  at(nll_of(pts[1].second) < nll_of(fit0) ? 2.0 : -1.0);
+  at(nll_of(pts[1].second) < nll_of(fit0) ? 2.0 : alpha_min <= -1.0 ? -1.0 : 0.5 * (alpha_min + 1.0));
   auto by_nll = [](const auto& x, const auto& y) { return nll_of(x.second) < nll_of(y.second); };
   for (int step = 0; step < 2; ++step) {
     std::sort(pts.begin(), pts.end(), by_nll);
@@ -63,7 +65,7 @@ Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaselin
     if (!std::isfinite(fa) || !std::isfinite(fb) || !std::isfinite(fc)) break;
     double xn = stats::parabola_vertex(xa, fa, xb, fb, xc, fc);
     if (!std::isfinite(xn)) xn = xa;
-    xn = std::clamp(xn, -2.0, 3.0);
+    xn = std::clamp(xn, alpha_min, 3.0);
     bool seen = false;
     for (const auto& p : pts) seen = seen || std::fabs(p.first - xn) < 1e-3;
     if (seen) break;
@@ -220,11 +222,13 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     const Mechanism* mech;
     std::vector<double> setting;
     std::vector<double> gains_ee;
-    // Shapes profiled by the likelihood too (empty: the equation-error one).
+    // Shapes profiled by the likelihood too (empty: the equation-error one),
+    // then these values of the first shape parameter at the best's others.
     std::vector<std::vector<double>> shapes{};
+    std::vector<double> then_first{};
     // > 0: the direction is this fixed gain, not the equation-error one
     // (correction at α = extension_correction at α × unit_scale).
-    double fixed_gain = 0.0, unit_scale = 1.0;
+    double fixed_gain = 0.0, unit_scale = 1.0, alpha_min = -2.0;
     // The correction is simulated from the model at the fit's D, K
     // (Mechanism::model_correction), not built from the data's columns.
     bool model_based = false;
@@ -237,9 +241,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       if (l->id() == c.id) m = l.get();
     if (!m) continue;
     Cand k{m, c.setting, {}};
-    const auto plan = m->likelihood_plan(d);
+    const auto plan = m->likelihood_plan(d, c.setting);
     k.shapes = plan.shapes;
     k.fixed_gain = plan.gain_per_unit;
+    k.alpha_min = plan.alpha_min;
+    k.then_first = plan.then_first;
     if (k.shapes.empty()) k.shapes = {c.setting};
     const std::vector<double> zero_gains(m->gains().size(), 0.0);
     k.model_based = !m->model_correction(d, c.setting, zero_gains, prep.pem.d, prep.pem.k).empty();
@@ -398,7 +404,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     parallel_for(jobs.size(), [&](std::size_t j) {
       Cand c = cands[todo[jobs[j].first]];
       if (c.shapes.size() > 1) set_shape(c, c.shapes[jobs[j].second]);  // one shape: set once, above
-      job_profiles[j] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur);
+      job_profiles[j] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
     });
     std::vector<Profile> profiles(todo.size());
     std::vector<int> best_job(todo.size(), -1);
@@ -412,22 +418,63 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     }
     std::vector<std::vector<double>> best_shape(todo.size());
     for (std::size_t t = 0; t < todo.size(); ++t) best_shape[t] = cands[todo[t]].shapes[jobs[static_cast<std::size_t>(best_job[t])].second];
-    // A one-parameter shape grid (the reflex's delays, 5 ms apart): two steps
-    // of successive parabolic interpolation between the grid's best point
-    // and its neighbours, one profile each, the best kept. Noise-free,
-    // hidden reflex 1.0 at 32.8 ms: the grid's 30 ms left the gain at 0.87
-    // and a spurious sensor lag named beside it (docs/diagnosis.md, "Pulse").
+    // The profiled points along the first shape parameter at the best
+    // shape's other parameters: (first parameter, NLL) per candidate.
+    std::vector<std::vector<std::pair<double, double>>> line(todo.size());
+    for (std::size_t j = 0; j < jobs.size(); ++j) {
+      const auto t = jobs[j].first;
+      const auto& sh = cands[todo[t]].shapes[jobs[j].second];
+      const auto& b = best_shape[t];
+      if (!sh.empty() && sh.size() == b.size() && std::equal(sh.begin() + 1, sh.end(), b.begin() + 1))
+        line[t].emplace_back(sh[0], nll_of(job_profiles[j].fit));
+    }
+    // A plan's second stage (LikelihoodPlan::then_first): more values of the
+    // first shape parameter at the best shape's others (the directional
+    // reflex's delays at its best direction).
+    {
+      std::vector<std::pair<std::size_t, std::vector<double>>> more;
+      for (std::size_t t = 0; t < todo.size(); ++t)
+        for (const double v : cands[todo[t]].then_first) {
+          std::vector<double> shape = best_shape[t];
+          if (shape.empty()) break;
+          shape[0] = v;
+          more.emplace_back(t, std::move(shape));
+        }
+      std::vector<Profile> got(more.size());
+      parallel_for(more.size(), [&](std::size_t m) {
+        Cand c = cands[todo[more[m].first]];
+        set_shape(c, more[m].second);
+        got[m] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+      });
+      for (std::size_t m = 0; m < more.size(); ++m) {
+        const auto t = more[m].first;
+        st.evaluations += passes(cands[todo[t]]) * got[m].evaluations;
+        line[t].emplace_back(more[m].second[0], nll_of(got[m].fit));
+        if (nll_of(got[m].fit) < nll_of(profiles[t].fit)) {
+          profiles[t] = got[m];
+          best_shape[t] = more[m].second;
+        }
+      }
+    }
+    // Along the first shape parameter (the reflex's delays, 5 ms apart; the
+    // directional reflex's at its best direction): two steps of successive
+    // parabolic interpolation between the best point and its neighbours, one
+    // profile each, the best kept. Noise-free, hidden reflex 1.0 at 32.8 ms:
+    // the grid's 30 ms left the gain at 0.87 and a spurious sensor lag named
+    // beside it (docs/diagnosis.md, "Pulse").
     std::vector<std::size_t> refine;
-    std::vector<std::vector<std::pair<double, double>>> pts;  // (shape, NLL) per refined candidate
+    std::vector<std::vector<std::pair<double, double>>> pts;  // (first shape parameter, NLL) per refined candidate
+    std::vector<std::vector<double>> rest;                    // the other shape parameters, kept
     for (std::size_t t = 0; t < todo.size(); ++t) {
-      const auto& sh = cands[todo[t]].shapes;
-      const auto h = jobs[static_cast<std::size_t>(best_job[t])].second;
-      if (sh.size() < 3 || sh.front().size() != 1 || h == 0 || h + 1 >= sh.size()) continue;
+      auto l = line[t];
+      std::sort(l.begin(), l.end());
+      std::size_t h = 0;
+      for (std::size_t q = 1; q < l.size(); ++q)
+        if (l[q].second < l[h].second) h = q;
+      if (l.size() < 3 || h == 0 || h + 1 >= l.size()) continue;
       refine.push_back(t);
-      pts.emplace_back();
-      for (std::size_t j = 0; j < jobs.size(); ++j)
-        if (jobs[j].first == t && jobs[j].second + 1 >= h && jobs[j].second <= h + 1)
-          pts.back().emplace_back(sh[jobs[j].second][0], nll_of(job_profiles[j].fit));
+      rest.emplace_back(best_shape[t].begin() + 1, best_shape[t].end());
+      pts.push_back({l[h - 1], l[h], l[h + 1]});
     }
     for (int step = 0; step < 2 && !refine.empty(); ++step) {
       std::vector<Profile> got(refine.size());
@@ -441,9 +488,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
         for (const auto& q : p)
           if (std::fabs(q.first - v) < 2e-4) return;  // already profiled there (within a sample at 4 kHz)
         Cand c = cands[todo[refine[r]]];
-        set_shape(c, {v});
+        std::vector<double> shape{v};
+        shape.insert(shape.end(), rest[r].begin(), rest[r].end());
+        set_shape(c, shape);
         at[r] = v;
-        got[r] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur);
+        got[r] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
       });
       for (std::size_t r = 0; r < refine.size(); ++r) {
         if (!std::isfinite(at[r])) continue;
@@ -453,6 +502,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
         if (nll_of(got[r].fit) < nll_of(profiles[t].fit)) {
           profiles[t] = got[r];
           best_shape[t] = {at[r]};
+          best_shape[t].insert(best_shape[t].end(), rest[r].begin(), rest[r].end());
         }
       }
     }
@@ -688,7 +738,7 @@ PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOption
   if (eo.progress)
     eo.progress("isolating the variational signals (eq. 21)" + std::string(po.pem_baseline ? " and fitting the default method" : ""));
   r.prep = prepare_planar(sessions, po, eo.folds);
-  r.lib = planar_library(po.nuisance_order, with_time_varying);
+  r.lib = planar_library(po.nuisance_order, with_time_varying, po.directional_reflex);
   eo.require_plausible = true;
   eo.rank_by_t = true;
   eo.prefer_simpler = true;
@@ -779,7 +829,8 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
   // the window (hidden reflex 0.5 × the intrinsic impedance named in 3/20
   // sessions; with a 50 ms, 20 N pulse 20/20; docs/diagnosis.md "Pulse").
   const double pulse_s = prep.info.perturbation.duration_s;
-  if (!prep.data.planar.empty() && pulse_s >= 0.1 && std::find(c.named.begin(), c.named.end(), "short_latency_reflex") == c.named.end())
+  const auto named = [&](const char* id) { return std::find(c.named.begin(), c.named.end(), id) != c.named.end(); };
+  if (!prep.data.planar.empty() && pulse_s >= 0.1 && !named("short_latency_reflex") && !named("directional_reflex"))
     c.protocol_note = "under this session's " + g4(pulse_s * 1e3) +
                       " ms pulse a short-latency reflex within the window is part of D, K (and looks like an inertia change); "
                       "a session with a 50 ms, 20 N pulse tells it apart (manip_rt: perturbation.duration_s, amplitude_n; "

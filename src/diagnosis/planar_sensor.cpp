@@ -128,7 +128,7 @@ class ForceSensorLag final : public Mechanism {
   // τ Δḟ_r = Δf_s − Δf_r (the derivation above) along the simulated
   // response. A negative τ (a lead, which the bounds refuse) continues
   // linearly: −c(|τ|).
-  LikelihoodPlan likelihood_plan(const Dataset&) const override {
+  LikelihoodPlan likelihood_plan(const Dataset&, std::span<const double>) const override {
     // Fixed direction: 3 ms per unit amplitude, so the profile's [−2, 3]
     // spans the bounds; the equation-error τ is too noisy to set it.
     return {{}, 0.003};

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <stdexcept>
 
 #include "manip/common/errors.hpp"
@@ -20,6 +21,7 @@ constexpr Named kNames[] = {{"delay", HiddenMechanism::actuation_delay, 0.05},
                             {"handle", HiddenMechanism::handle_mass, 5.0},
                             {"reflex", HiddenMechanism::reflex, 3.0},
                             {"feedback", HiddenMechanism::feedback, 3.0},
+                            {"reflex_dir", HiddenMechanism::reflex_dir, 3.0},
                             {"curl", HiddenMechanism::curl, 500.0},
                             {"sensor_lag", HiddenMechanism::sensor_lag, 0.02},
                             {"sensor_offset", HiddenMechanism::sensor_offset, 50.0},
@@ -39,7 +41,7 @@ HiddenEffect parse_hidden_effect(const std::string& text) {
   const std::string what = "--hidden '" + text + "'";
   if (colon == std::string::npos)
     throw UsageError(what + ": expected MECHANISM:MAGNITUDE (delay:0.002, friction:1, handle:0.3, reflex:0.5, feedback:0.5, "
-                     "curl:40, sensor_lag:0.001, sensor_offset:2, sensor_drift:0.05)");
+                     "reflex_dir:1, curl:40, sensor_lag:0.001, sensor_offset:2, sensor_drift:0.05)");
   const std::string name = text.substr(0, colon), value = text.substr(colon + 1);
   for (const auto& n : kNames) {
     if (name != n.name) continue;
@@ -57,7 +59,7 @@ HiddenEffect parse_hidden_effect(const std::string& text) {
     return HiddenEffect{n.m, v};
   }
   throw UsageError(what + ": unknown mechanism '" + name +
-                   "' (delay, friction, handle, reflex, feedback, curl, sensor_lag, sensor_offset, sensor_drift)");
+                   "' (delay, friction, handle, reflex, feedback, reflex_dir, curl, sensor_lag, sensor_offset, sensor_drift)");
 }
 
 HiddenEffectHuman::HiddenEffectHuman(const LinearHumanParams& person, std::vector<HiddenEffect> effects,
@@ -73,10 +75,13 @@ HiddenEffectHuman::HiddenEffectHuman(const LinearHumanParams& person, std::vecto
       case HiddenMechanism::curl: curl_npm_ += (Mat2() << 0.0, e.magnitude, -e.magnitude, 0.0).finished(); break;
       case HiddenMechanism::stage_friction: break;  // in the plant (SessionDesign::hidden_stage_friction_n)
       case HiddenMechanism::reflex:
-      case HiddenMechanism::feedback: {
-        auto& c = delayed_[e.mechanism == HiddenMechanism::reflex ? 0 : 1];
+      case HiddenMechanism::feedback:
+      case HiddenMechanism::reflex_dir: {
+        const std::size_t i = e.mechanism == HiddenMechanism::reflex ? 0 : e.mechanism == HiddenMechanism::feedback ? 1 : 2;
+        auto& c = delayed_[i];
         c.k_npm += e.magnitude * person.k_npm;
         c.d_nspm += e.magnitude * person.d_nspm;
+        if (i == 2) c.one_sided = Vec2(std::cos(draw.reflex_direction_rad), std::sin(draw.reflex_direction_rad));
         break;
       }
       case HiddenMechanism::actuation_delay: break;  // in the plant (SessionDesign::actuation_delay_cycles)
@@ -85,7 +90,7 @@ HiddenEffectHuman::HiddenEffectHuman(const LinearHumanParams& person, std::vecto
       case HiddenMechanism::sensor_drift: break;
     }
   }
-  const double delay_s[2] = {draw.reflex_delay_s, draw.feedback_delay_s};
+  const double delay_s[3] = {draw.reflex_delay_s, draw.feedback_delay_s, draw.reflex_delay_s};
   for (std::size_t i = 0; i < delayed_.size(); ++i)
     delayed_[i].ring.assign(static_cast<std::size_t>(std::max(1L, std::lround(delay_s[i] / plant_step_s))), {0.0, 0.0, 0.0, 0.0});
 }
@@ -110,12 +115,15 @@ void HiddenEffectHuman::endpoint_dynamics(Mat2& m_x_kg, Vec2& h_n) {
   for (const auto& c : delayed_) {
     if (c.k_npm.isZero()) continue;
     const auto& old = c.ring[c.head];  // oldest entry: the error one delay ago
-    h_n += c.k_npm * Vec2(old[0], old[1]) + c.d_nspm * Vec2(old[2], old[3]);
+    const Vec2 copy = c.k_npm * Vec2(old[0], old[1]) + c.d_nspm * Vec2(old[2], old[3]);
+    // One-sided: a deviation along w (e = plan − hand against w) stretches the
+    // group, which pulls back along −w; shortened, it adds nothing.
+    h_n += c.one_sided.isZero() ? copy : Vec2(c.one_sided * std::min(0.0, c.one_sided.dot(copy)));
   }
 }
 
 void HiddenEffectHuman::advance(double dt_s, const Vec2& xdd_hand_mps2) {
-  if (!delayed_[0].k_npm.isZero() || !delayed_[1].k_npm.isZero()) {
+  if (std::any_of(delayed_.begin(), delayed_.end(), [](const DelayedCopy& c) { return !c.k_npm.isZero(); })) {
     const auto plan = min_jerk(reach_.start_shoulder_m, reach_.goal_shoulder_m, reach_.t_start_s, reach_.duration_s,
                                reach_.lateral_bow_m, inner_.time_s());
     const Vec2 e = plan.x - inner_.hand_position_m(), ed = plan.xd - inner_.hand_velocity_mps();
@@ -136,6 +144,7 @@ HiddenSession make_hidden_session(const SessionDesign& base, const LinearHumanPa
   hs.draw.impedance_scale = 0.85 + 0.30 * rng.uniform();
   hs.draw.reflex_delay_s = 0.025 + 0.010 * rng.uniform();
   hs.draw.feedback_delay_s = 0.060 + 0.040 * rng.uniform();  // after the other draws: they stay as they were
+  hs.draw.reflex_direction_rad = 2.0 * std::numbers::pi * rng.uniform();  // likewise
   LinearHumanParams person = person0;
   person.d_nspm *= hs.draw.impedance_scale;
   person.k_npm *= hs.draw.impedance_scale;

@@ -50,6 +50,7 @@ struct Case {
   int heldout_folds = -1;  // the likelihood check's held-out folds (-1: the engine's 10)
   double pulse_s = 0.0;    // perturbation pulse duration (0: the schema's 150 ms, paper §3.2)
   double pulse_n = 0.0;    // its amplitude (0: the schema's 15 N)
+  bool directional = false;  // the library with the direction-dependent reflex (PlanarOptions::directional_reflex)
 };
 
 inline Outcome run_case(const Case& c) {
@@ -78,6 +79,7 @@ inline Outcome run_case(const Case& c) {
   o.k_intr = person.k_npm * hs.draw.impedance_scale;
   PlanarOptions po;
   if (const char* ord = std::getenv("MANIP_MSTUDY_ORDER")) po.nuisance_order = std::atoi(ord);
+  po.directional_reflex = c.directional;
   EngineOptions eo;
   eo.bootstrap = c.bootstrap;
   auto run = run_planar(ses, po, eo, false, c.heldout_folds);
@@ -147,7 +149,8 @@ inline std::string show(const Matrix2d& m) {
 // reflex, the early feedback): the corrected D, K are checked against the
 // intrinsic truth, every other mechanism's against the apparent truth.
 inline bool separates_feedback(const sim::HiddenEffect& e) {
-  return e.mechanism == sim::HiddenMechanism::reflex || e.mechanism == sim::HiddenMechanism::feedback;
+  return e.mechanism == sim::HiddenMechanism::reflex || e.mechanism == sim::HiddenMechanism::feedback ||
+         e.mechanism == sim::HiddenMechanism::reflex_dir;
 }
 
 // The main parameter of each mechanism and its true value.
@@ -163,6 +166,7 @@ inline MainParam main_param_of(const sim::HiddenEffect& e, const sim::HiddenDraw
     case sim::HiddenMechanism::handle_mass: return {"handle_mass", "handle_extra", e.magnitude};
     case sim::HiddenMechanism::reflex: return {"short_latency_reflex", "delay", draw.reflex_delay_s};
     case sim::HiddenMechanism::feedback: return {"early_feedback", "delay", draw.feedback_delay_s};
+    case sim::HiddenMechanism::reflex_dir: return {"directional_reflex", "delay", draw.reflex_delay_s};
     case sim::HiddenMechanism::curl: return {"curl_stiffness", "curl_c", e.magnitude};
     case sim::HiddenMechanism::sensor_lag: return {"force_sensor_lag", "sensor_lag", e.magnitude};
     // Offset and drift have no mechanism (removed by the isolation; docs/diagnosis.md).

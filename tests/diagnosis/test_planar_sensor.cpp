@@ -147,12 +147,12 @@ TEST_CASE("planar sensor: the lag's model correction against the exact discretis
   // actuation delay (exact from u_pert alone) and the friction (absolute
   // stage velocity) have none.
   const std::vector<double> delay{0.03};
-  for (const auto& m : planar_library(true)) {
+  for (const auto& m : planar_library(true, true)) {
     const bool has = !m->model_correction(d, delay, std::vector<double>(m->gains().size(), 0.0), dm, km).empty();
     INFO(m->id());
     const std::string id = m->id();
     CHECK(has == (id == "force_sensor_lag" || id == "handle_mass" || id == "wrong_segment_inertia" || id == "curl_stiffness" ||
-                  id == "short_latency_reflex" || id == "early_feedback"));
+                  id == "short_latency_reflex" || id == "early_feedback" || id == "directional_reflex"));
   }
 }
 

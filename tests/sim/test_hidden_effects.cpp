@@ -72,6 +72,7 @@ TEST_CASE("hidden effects: parse MECHANISM:MAGNITUDE, refuse bad text with a mes
   CHECK(parse_hidden_effect("friction:1").mechanism == HiddenMechanism::stage_friction);
   CHECK(parse_hidden_effect("reflex:0.5").mechanism == HiddenMechanism::reflex);
   CHECK(parse_hidden_effect("feedback:0.5").mechanism == HiddenMechanism::feedback);
+  CHECK(parse_hidden_effect("reflex_dir:1").mechanism == HiddenMechanism::reflex_dir);
   CHECK(parse_hidden_effect("curl:40").mechanism == HiddenMechanism::curl);
   for (const char* bad : {"handle", "handle:", "handle:abc", "handle:0.3x", "mass:0.3", "delay:2", "curl:-40", "curl:nan"}) {
     INFO(bad);
@@ -157,5 +158,53 @@ TEST_CASE("hidden effects: each mechanism shifts the default (pem) estimate the 
     CHECK(std::abs(curl - 40.0) < 0.10 * 40.0);
     REQUIRE(clean.apparent);
     CHECK(std::abs(0.5 * (clean.apparent->k_npm(0, 1) - clean.apparent->k_npm(1, 0))) < 0.10 * 40.0);
+  }
+}
+
+// The direction-dependent reflex against its law, sample by sample: a group
+// along w that a displacement along w stretches pulls back along −w with g ×
+// the intrinsic K, D of the deviation one delay ago, w min(0, wᵀ[K e + D ė]);
+// displaced against w (shortened) it adds nothing. The hand is driven at a
+// constant acceleration while the plan holds still (reach onset after 10 s).
+TEST_CASE("hidden effects: the direction-dependent reflex acts along w, one delay late, only when stretched") {
+  LinearHumanParams person;  // no motor noise
+  HiddenDraw draw;
+  draw.reflex_delay_s = 0.030;
+  draw.reflex_direction_rad = 2.0;  // w = (cos 2, sin 2)
+  const double step_s = 1.0 / 16000.0, g = 0.8;
+  const Vec2 w(std::cos(2.0), std::sin(2.0));
+  ReachSpec reach;
+  reach.t_start_s = 10.0;
+  const auto lag = static_cast<std::size_t>(std::lround(draw.reflex_delay_s / step_s));
+  for (const double sign : {1.0, -1.0}) {
+    // Along ±w, turned by 0.3 rad so the deviation is not exactly on the line.
+    const Vec2 dir = sign * Vec2(std::cos(2.3), std::sin(2.3));
+    HiddenEffectHuman clean(person, {}, draw, step_s), dirr(person, {{HiddenMechanism::reflex_dir, g}}, draw, step_s);
+    clean.begin_trial(reach, 7);
+    dirr.begin_trial(reach, 7);
+    std::vector<Vec2> x, v;
+    const std::size_t n = 1600;  // 100 ms
+    for (std::size_t k = 0; k < n; ++k) {
+      x.push_back(dirr.hand_position_m());
+      v.push_back(dirr.hand_velocity_mps());
+      clean.advance(step_s, 2.0 * dir);
+      dirr.advance(step_s, 2.0 * dir);
+    }
+    Mat2 m;
+    Vec2 h_clean, h_dir;
+    clean.endpoint_dynamics(m, h_clean);
+    dirr.endpoint_dynamics(m, h_dir);
+    // The oldest ring entry: the state after n − lag advances.
+    const Vec2 e = reach.start_shoulder_m - x[n - lag], ed = -v[n - lag];
+    const Vec2 copy = g * (person.k_npm * e + person.d_nspm * ed);
+    const Vec2 want = w * std::min(0.0, w.dot(copy));
+    INFO("sign " << sign << ": reflex force " << (h_dir - h_clean).transpose() << ", law " << want.transpose());
+    CHECK((h_dir - h_clean - want).norm() < 1e-9 + 1e-6 * copy.norm());
+    if (sign > 0) {
+      CHECK(want.norm() > 0.1);            // stretched: it acts (N)
+      CHECK(want.dot(w) < 0.0);            // and pulls back against w
+    } else {
+      CHECK((h_dir - h_clean).norm() == 0.0);  // shortened: nothing
+    }
   }
 }

@@ -91,6 +91,11 @@ struct PlanarOptions {
   // hidden sessions (docs/diagnosis.md); a cubic removes most of the
   // perturbation response itself from a 150 ms window.
   int nuisance_order = 1;
+  // Add the direction-dependent reflex to the library (off by default: its
+  // rectified copy's even half also fits a residual common to every trial
+  // along the reach, which named it in 2 of 20 clean sessions;
+  // docs/diagnosis.md, "Direction-dependent reflex").
+  bool directional_reflex = false;
 };
 
 // The estimator's default method fitted on the same trials (for the report).
@@ -181,10 +186,11 @@ struct PlanarPrepared {
 [[nodiscard]] std::string configuration_difference(const estimation::SessionInfo& a, const estimation::SessionInfo& b);
 
 // The manipulandum's mechanism library (docs/diagnosis.md lists signatures and bounds).
-[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(bool with_time_varying = false);
+[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(bool with_time_varying = false, bool with_directional_reflex = false);
 // The same, each mechanism's columns projected like a dataset prepared with
 // PlanarOptions::nuisance_order (use the same order).
-[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(int nuisance_order, bool with_time_varying = false);
+[[nodiscard]] std::vector<std::unique_ptr<Mechanism>> planar_library(int nuisance_order, bool with_time_varying = false,
+                                                                     bool with_directional_reflex = false);
 // The short-latency reflex's gain g against the intrinsic D, K from its share
 // of the apparent impedance g_app = g / (1 + g) (the library's gain_apparent):
 // g = g_app / (1 − g_app), the share capped at 0.9 (≥ 1 would be a reflex
@@ -257,6 +263,12 @@ struct LinearExtension {
   Eigen::Matrix2d mass_kg = Eigen::Matrix2d::Zero(), stiffness_npm = Eigen::Matrix2d::Zero();
   Eigen::Matrix2d damping_delayed_nspm = Eigen::Matrix2d::Zero(), stiffness_delayed_npm = Eigen::Matrix2d::Zero();
   double delay_s = 0.0;  // of the delayed terms (≥ one sample when they are used)
+  // One-sided delayed terms (unit w; zero: none): of the delayed force
+  // c = D_d Δẋ(t − τ) + K_d Δx(t − τ) only delayed_gain × w max(0, wᵀ c)
+  // acts: a muscle group along w, stretched by a deviation along w
+  // (the direction-dependent reflex). Otherwise delayed_gain × c.
+  Eigen::Vector2d delayed_one_sided_along = Eigen::Vector2d::Zero();
+  double delayed_gain = 1.0;
   double sensor_lag_s = 0.0;
 };
 // The correction of u_pert that makes the baseline variational model

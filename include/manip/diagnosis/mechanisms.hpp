@@ -48,11 +48,18 @@ class Mechanism {
   // profiled amplitude; 0: the equation-error gain). A fixed direction and
   // shapes of its own are for mechanisms whose equation-error estimate is
   // noise at realistic magnitudes (the reflex's delay and gain).
+  // alpha_min: the profiled amplitude's lower bound (one-sided mechanisms:
+  // 0, their opposite direction is a shape of its own). then_first: a second
+  // stage, these values of the first shape parameter at the best shape's
+  // others (the best of all is refined along it).
   struct LikelihoodPlan {
     std::vector<std::vector<double>> shapes;
     double gain_per_unit = 0.0;
+    double alpha_min = -2.0;
+    std::vector<double> then_first{};
   };
-  [[nodiscard]] virtual LikelihoodPlan likelihood_plan(const Dataset&) const { return {}; }
+  // `setting`: the equation error's best shape (a plan may profile around it).
+  [[nodiscard]] virtual LikelihoodPlan likelihood_plan(const Dataset&, std::span<const double> /*setting*/) const { return {}; }
   // A correction of the perturbation force (per planar trial, per sample of
   // the window [onset, onset + T_est]; the input side of eq. 19-21, as
   // extension_correction) simulated from the model at the person's D, K and

@@ -23,6 +23,14 @@
 //                   intrinsic K and D on the deviation from the plan delayed by
 //                   80 ms (randomised in [60, 100] ms by the hidden seed; the
 //                   paper's neuromechanical feedback delay δ_s is 60 ms, §4).
+//   reflex_dir:MAG  a direction-dependent short-latency reflex: one muscle
+//                   group's, along its line w and only while a deviation
+//                   along w stretches it: MAG w min(0, wᵀ[K e + D ė](t − τ))
+//                   with the person's intrinsic K, D (e = plan − hand), the
+//                   reflex's delay, w at an angle drawn uniformly from the
+//                   hidden seed (HiddenDraw::reflex_direction_rad). A
+//                   push along w meets MAG × the intrinsic impedance along
+//                   w more; a push against w none.
 //   curl:MAG_Npm    antisymmetric (curl) stiffness [0 MAG; -MAG 0] on the
 //                   deviation from the plan (heteronymous reflexes, paper §3.3).
 //   sensor_lag:MAG_s     the handle force sensor's reading is its force through a
@@ -53,6 +61,7 @@ enum class HiddenMechanism {
   handle_mass,
   reflex,
   feedback,
+  reflex_dir,
   curl,
   sensor_lag,
   sensor_offset,
@@ -64,7 +73,7 @@ struct HiddenEffect {
   double magnitude{0.0};  // SI: s, N, kg, fraction of K, N/m (sensor: s, N, N/s)
 };
 
-// "delay:0.002", "friction:1", "handle:0.3", "reflex:0.5", "feedback:0.5", "curl:40",
+// "delay:0.002", "friction:1", "handle:0.3", "reflex:0.5", "feedback:0.5", "reflex_dir:1", "curl:40",
 // "sensor_lag:0.001", "sensor_offset:2", "sensor_drift:0.05".
 // Throws manip::UsageError naming the text and what is wrong.
 HiddenEffect parse_hidden_effect(const std::string& text);
@@ -78,6 +87,9 @@ struct HiddenDraw {
   double reflex_delay_s{0.030};
   int actuation_delay_cycles{0};
   double feedback_delay_s{0.080};
+  // reflex_dir: the displacement direction that stretches the muscle group,
+  // counter-clockwise from +x1 of the shoulder frame (drawn after the others).
+  double reflex_direction_rad{0.0};
 };
 
 // A person with the hidden person-side effects (reflex, feedback, curl) added to the
@@ -102,15 +114,17 @@ class HiddenEffectHuman final : public HumanModel, public TruthSource {
  private:
   LinearImpedanceHuman inner_;
   ReachSpec reach_;
-  // g [K e + D ė](t − τ) on the deviation e from the plan: the reflex and the
-  // early feedback, each with its own delay line of (e, ė) at the plant step.
+  // g [K e + D ė](t − τ) on the deviation e from the plan: the reflex, the
+  // early feedback and the direction-dependent reflex, each with its own
+  // delay line of (e, ė) at the plant step.
   struct DelayedCopy {
     Mat2 k_npm{Mat2::Zero()}, d_nspm{Mat2::Zero()};
+    Vec2 one_sided{Vec2::Zero()};  // unit w: only w min(0, wᵀ c) of the copy c acts (zero: all of it)
     std::vector<std::array<double, 4>> ring;
     std::size_t head{0};
   };
   Mat2 curl_npm_{Mat2::Zero()};
-  std::array<DelayedCopy, 2> delayed_;  // reflex, feedback
+  std::array<DelayedCopy, 3> delayed_;  // reflex, feedback, reflex_dir
 };
 
 // Builds the design and the person of one hidden session: `base` (movements,
