@@ -598,7 +598,7 @@ std::vector<std::vector<Vector2d>> simulate_extension(const Dataset& d, const Ma
           const Vector2d& w = e.delayed_one_sided_along;
           const Vector2d copy = e.damping_delayed_nspm * vd + e.stiffness_delayed_npm * xd;
           rest = d_nspm * v0 + (k_npm + e.stiffness_npm) * x0 + e.delayed_gain * Vector2d(w * std::max(0.0, w.dot(copy)));
-        } else {  // delayed_gain folded into the matrices (as written before the one-sided form: the same rounding)
+        } else {  // summed term by term as before the one-sided form: the same rounding, the same results
           rest = d_nspm * v0 + (k_npm + e.stiffness_npm) * x0 + e.delayed_gain * e.damping_delayed_nspm * vd +
                  e.delayed_gain * e.stiffness_delayed_npm * xd;
         }
@@ -959,7 +959,11 @@ struct DelayedCopySpec {
 // The one-sided copy's direction grids: the equation error's 16 directions,
 // 22.5° apart; the likelihood check's 8, 45° apart.
 constexpr int kDirections = 16, kProfileDirections = 8;
-Vector2d unit_at(double psi_rad) { return {std::cos(psi_rad), std::sin(psi_rad)}; }
+// w of a one-sided copy's shape (delay, direction ψ).
+Vector2d direction_of(std::span<const double> shape) {
+  const double psi = shape.size() > 1 ? shape[1] : 0.0;
+  return {std::cos(psi), std::sin(psi)};
+}
 
 class PlanarReflex final : public Mechanism {
  public:
@@ -993,8 +997,9 @@ class PlanarReflex final : public Mechanism {
   // fixed direction: gain_apparent 0.25 per unit amplitude (the profile's
   // [−2, 3] spans the physiological range).
   // The one-sided copy profiles 8 directions itself at the middle delay,
-  // then the other two delays at the best direction, with g ≥ 0: a group along w with gain g and one along −w with gain −g differ
-  // only by a symmetric copy, which D, K absorb to first order, so with
+  // then the other two delays at the best direction, with g ≥ 0: a group
+  // along w with gain g and one along −w with gain −g differ only by a
+  // symmetric copy, which D, K absorb to first order, so with
   // negative gains allowed opposite directions fit alike (hidden
   // directional reflex 1.0 at 51°, seed 5000: LR 14 at 135° with g < 0
   // against 11 at 45°, where g came out at the truth). The equation error's
@@ -1022,7 +1027,7 @@ class PlanarReflex final : public Mechanism {
       e.damping_delayed_nspm = dm;
       e.stiffness_delayed_npm = km;
       e.delayed_gain = gain;
-      e.delayed_one_sided_along = unit_at(s.size() > 1 ? s[1] : 0.0);
+      e.delayed_one_sided_along = direction_of(s);
     }
     return simulate_extension(d, dm, km, [&](const PlanarTrial&) { return e; });
   }
@@ -1059,11 +1064,8 @@ class PlanarReflex final : public Mechanism {
       d1 = (m11 * rd - m21 * rk) / det;
       return;
     }
-    Matrix2d p = Matrix2d::Identity();
-    {
-      const Vector2d w = unit_at(s.size() > 1 ? s[1] : 0.0);
-      p = stretch_share(d, tau, w, d0, k0) * w * w.transpose();
-    }
+    const Vector2d w = direction_of(s);
+    const Matrix2d p = stretch_share(d, tau, w, d0, k0) * w * w.transpose();
     Eigen::Matrix4d a;
     a << Matrix2d::Identity() + gain * pr.a_x * p, gain * pr.a_v * p, gain * pr.b_x * p, Matrix2d::Identity() + gain * pr.b_v * p;
     Eigen::Matrix<double, 4, 2> rhs;
@@ -1103,7 +1105,7 @@ class PlanarReflex final : public Mechanism {
   Columns columns(const Dataset& d, std::span<const double> s) const override {
     const auto lag = static_cast<std::size_t>(std::lround(s[0] / d.dt_s));
     const Matrix2d dr = d.planar_ref_d, kr = d.planar_ref_k;
-    const Vector2d w = spec_.one_sided ? unit_at(s.size() > 1 ? s[1] : 0.0) : Vector2d::Zero();
+    const Vector2d w = spec_.one_sided ? direction_of(s) : Vector2d::Zero();
     return planar_columns(d, 1, [lag, dr, kr, w](const PlanarTrial& p, int a, std::size_t k, auto& c, std::size_t i) {
       if (k < lag) return;
       const Vector2d copy = dr * p.dxd[k - lag] + kr * p.dx[k - lag];
