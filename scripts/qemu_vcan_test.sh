@@ -17,11 +17,18 @@
 # protocol (every SYNC on the wire answered by RPDO1, TPDO1 and TPDO2 within
 # +-2 at the window edges, every SYNC the master counted seen on the wire,
 # zero unexpected frames, no EMCY, no fault, drives disabled at the end).
-# Timing gates are loose on purpose: median SYNC period in [450, 750] us and
-# at least 15 % of the configured SYNC rate (the emulated loop reached 0.9 to
-# 1.5 of 4 kHz on a shared 2-core host, i.e. 26-43 % of the SYNCs: the gates
-# only catch a stalled or early master; the achieved figures are printed).
-# The period spread and the SYNC -> TPDO round trip are reported, not gated. Three vCPUs under multi-threaded TCG (master + two
+# Timing gates are relative to what the emulated loop achieved, never to the
+# host's speed: the median SYNC period at least 450 us and at most
+# max(750 us, 500 us + 2 x the loop's median cycle), and at least 30 % of
+# min(SYNC periods in the window, loop cycles run). The emulated loop reached
+# 0.9 to 1.5 kHz of 4 kHz on an idle shared 2-core host (26-43 % of the
+# configured SYNCs) and 656 Hz on a loaded CI host (median SYNC period 873 us,
+# which failed the former fixed 750 us gate); the master can only send at a
+# loop cycle, and a due SYNC goes out at the first one past its due time, so
+# an exactly-working master sends at least half the achievable count (0.57 and
+# 0.94 measured). The gates catch a stalled or early master on any host; the
+# achieved figures are printed. The period spread and the SYNC -> TPDO round
+# trip are reported, not gated. Three vCPUs under multi-threaded TCG (master + two
 # drive processes), each drive's SYNC-loss alarm off (see the init script).
 #
 # Idempotent: downloads (apt-get download) and extracts the kernel once into
@@ -115,7 +122,7 @@ mkvcan vcan0 && mkvcan vcan1 && mkvcan vcan2 || echo "GUEST mkvcan failed"
 manip_fake_drive --iface vcan0 --node 1 --sync-loss-limit 0 > /tmp/d1.log 2>&1 &
 manip_fake_drive --iface vcan1 --node 2 --sync-loss-limit 0 > /tmp/d2.log 2>&1 &
 sleep 1
-manip_vcan_session --config /etc/bus.yml --duration $duration --min-rate-fraction ${MANIP_VCAN_MIN_RATE:-0.15} --sync-median-max 1.5
+manip_vcan_session --config /etc/bus.yml --duration $duration --min-rate-fraction ${MANIP_VCAN_MIN_RATE:-0.3} --sync-median-max 1.5
 echo "GUEST_EXIT=\$?"
 # Across processes: the commissioning check against the drive processes.
 manip_can_check --config /etc/bus.yml --periods 400 > /tmp/cc.log 2>&1; echo "CANCHECK good rc=\$?"

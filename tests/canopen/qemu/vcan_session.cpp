@@ -6,11 +6,19 @@
 // second raw socket per interface (no filter, SO_TIMESTAMPNS) sniffs every
 // frame on the wire; the cyclic window is checked:
 //   - every SYNC answered: RPDO1, TPDO1 (and TPDO2) counts equal the SYNC count (+-2 at the edges);
-//   - SYNC count vs the configured rate over the window (emulated guests lose
-//     loop cycles: reported, checked against --min-rate-fraction);
+//   - SYNC count against what the loop could send: at least --min-rate-fraction
+//     of min(SYNC periods in the window, loop cycles run). The master can only
+//     send at a write(), so an emulated guest that runs the loop at a fraction
+//     of 4 kHz (host load) lowers the achievable count; a stalled master does not
+//     depend on the host and is caught the same on any machine;
 //   - zero unexpected frames (anything but SYNC, RPDO1, TPDO1/2, heartbeats, EMCY = 0);
 //   - SYNC period statistics from kernel receive timestamps (reported; the
-//     median checked in [1 - --sync-tolerance, --sync-median-max] x the period);
+//     median never early by more than --sync-tolerance, and late by at most
+//     max(--sync-median-max x the period, the period + 2 x the loop's median
+//     cycle): a due SYNC goes out at the first write() at or after its due time,
+//     so an interval exceeds the period by at most the loop cycle that straddles
+//     the deadline, and a random deadline lands in a long cycle more often than
+//     in a short one, hence twice the median cycle);
 //   - PDO round trip SYNC -> TPDO1 (reported only).
 // Prints one "VCAN_RESULT PASS|FAIL ..." line; exit 0 on PASS, 1 on FAIL, 3 on set-up errors.
 #include <linux/can.h>
@@ -176,12 +184,16 @@ int main(int argc, char** argv) {
   for (std::size_t b = 0; b < nb; ++b) syncs0[b] = set.master(b).syncs_sent();
   const int64_t w0_ns = real_ns(), w0_us = mono_us();
   int64_t cycles = 0, late = 0;
+  std::vector<double> loop_cycle_us;
+  loop_cycle_us.reserve(std::size_t(duration_s * 1e6 / double(loop_us)) + 16);
   bool faulted = false;
   const int64_t end_us = w0_us + int64_t(duration_s * 1e6);
   int64_t now = w0_us;
   while (now < end_us) {
     const int64_t due = next + loop_us;
+    const int64_t before = now;
     now = tick();
+    loop_cycle_us.push_back(double(now - before));
     if (now - due > loop_us) ++late;
     set.read(now);
     // write() every cycle: the master emits SYNC + RPDO when its SYNC period
@@ -203,8 +215,11 @@ int main(int argc, char** argv) {
   const cc::Error es = set.shutdown(tick);
   drain_all();
   const double window_s = (w1_us - w0_us) * 1e-6;
-  std::printf("cyclic window %.3f s, %lld loop cycles (%.0f Hz achieved, 4000 configured), %lld late by > 1 cycle\n",
-              window_s, (long long)cycles, cycles / window_s, (long long)late);
+  const double loop_p50_us = pct(loop_cycle_us, 50);
+  std::printf("cyclic window %.3f s, %lld loop cycles (%.0f Hz achieved, 4000 configured), %lld late by > 1 cycle; "
+              "loop cycle p50 %.1f us, p99 %.1f us, max %.1f us\n",
+              window_s, (long long)cycles, cycles / window_s, (long long)late, loop_p50_us, pct(loop_cycle_us, 99),
+              pct(loop_cycle_us, 100));
   if (faulted) std::printf("FAULT during the cyclic phase: %s\n", cc::describe(fault).c_str());
   if (ed) std::printf("disable: %s\n", cc::describe(ed).c_str());
   if (es) std::printf("shutdown: %s\n", cc::describe(es).c_str());
@@ -261,10 +276,15 @@ int main(int argc, char** argv) {
                   sync_tolerance * 100, period_us);
       std::printf("  PDO round trip SYNC -> TPDO1 (other process, emulated guest): p50 %.1f us, p99 %.1f us, max %.1f us\n",
                   pct(rtt, 50), pct(rtt, 99), pct(rtt, 100));
-      // Never early by more than the tolerance; late by at most sync_median_max
-      // (the emulated guest's loop falls behind, the master then resynchronises).
+      // Never early by more than the tolerance; late by at most what the loop's
+      // own cycle allows (header): the emulated guest's loop falls behind with
+      // the host's load (CI: 656 Hz, SYNC median 873 us), the master then sends
+      // at each write() past the due time and resynchronises.
       const double p50 = pct(periods, 50);
-      if (p50 < (1.0 - sync_tolerance) * period_us || p50 > sync_median_max * period_us) {
+      const double late_max_us = std::max(sync_median_max * period_us, period_us + 2.0 * loop_p50_us);
+      std::printf("  SYNC period median %.1f us: allowed [%.1f, %.1f] us (loop cycle median %.1f us)\n", p50,
+                  (1.0 - sync_tolerance) * period_us, late_max_us, loop_p50_us);
+      if (p50 < (1.0 - sync_tolerance) * period_us || p50 > late_max_us) {
         pass = false;
         why += " sync-median";
       }
@@ -281,7 +301,8 @@ int main(int argc, char** argv) {
     if (!near(n_tpdo1, n_sync)) { pass = false; why += " tpdo1!=sync"; }
     if (d.tpdo2.count > 0 && !near(n_tpdo2, n_sync)) { pass = false; why += " tpdo2!=sync"; }
     if (!near(n_sync, syncs_sent[b])) { pass = false; why += " sync-lost"; }
-    if (n_sync < min_rate_fraction * window_s * 1e6 / period_us) { pass = false; why += " sync-rate"; }
+    const double sync_achievable = std::min(window_s * 1e6 / period_us, double(cycles));
+    if (n_sync < min_rate_fraction * sync_achievable) { pass = false; why += " sync-rate"; }
     if (n_bad) {
       pass = false;
       char buf[64];
