@@ -33,23 +33,11 @@ Correction add(const Correction& a, const Correction& b) {
   return c;
 }
 
-// Profile of the negative log-likelihood in the amplitude α (D, K and the
-// noise model re-fitted at every α). The correction enters the model's input
-// linearly, so NLL(α) is close to a parabola: α = 0 (given), 1, then 2 or −1
-// towards the descent, then two steps of successive parabolic interpolation
-// through the three best points, α clamped to [−2, 3].
-struct Profile {
-  double alpha = 0.0;
-  PemBaseline fit;
-  int evaluations = 0;
-  // 95 % profile-likelihood half-width in α (stats::profile_interval; NaN
-  // when the profile is not convex around its best points).
-  double half_width = std::numeric_limits<double>::quiet_NaN();
-};
-// alpha_min: the amplitude's lower bound (a one-sided mechanism's negative
-// amplitude is its opposite direction, profiled on its own).
-Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaseline& fit0, double alpha_min = -2.0) {
-  Profile out;
+}  // namespace
+
+// The amplitude profile (header: AmplitudeProfile).
+AmplitudeProfile profile_amplitude(const std::function<PemBaseline(double)>& eval, const PemBaseline& fit0, double alpha_min) {
+  AmplitudeProfile out;
   std::vector<std::pair<double, PemBaseline>> pts = {{0.0, fit0}};
   auto at = [&](double a) {
     ++out.evaluations;
@@ -58,13 +46,43 @@ Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaselin
   at(1.0);
   at(nll_of(pts[1].second) < nll_of(fit0) ? 2.0 : alpha_min <= -1.0 ? -1.0 : 0.5 * (alpha_min + 1.0));
   auto by_nll = [](const auto& x, const auto& y) { return nll_of(x.second) < nll_of(y.second); };
-  for (int step = 0; step < 2; ++step) {
+  bool expanded = false;
+  for (int step = 0; step < (expanded ? 3 : 2); ++step) {
     std::sort(pts.begin(), pts.end(), by_nll);
     const double xa = pts[0].first, xb = pts[1].first, xc = pts[2].first;
     const double fa = nll_of(pts[0].second), fb = nll_of(pts[1].second), fc = nll_of(pts[2].second);
     if (!std::isfinite(fa) || !std::isfinite(fb) || !std::isfinite(fc)) break;
-    double xn = stats::parabola_vertex(xa, fa, xb, fb, xc, fc);
-    if (!std::isfinite(xn)) xn = xa;
+    // Second divided difference: > 0 where the parabola has a minimum.
+    const double curvature = ((fc - fa) / (xc - xa) - (fb - fa) / (xb - xa)) / (xc - xb);
+    double xn;
+    if (!(curvature > 0.0) && !expanded) {
+      const double nearest = std::fabs(xb - xa) < std::fabs(xc - xa) ? xb : xc;
+      xn = xa + (xa - nearest);
+      expanded = true;
+    } else if (expanded) {
+      // After the outward step: the best and its neighbours in α bracket the
+      // minimum (the three best may not: past the best the NLL can rise
+      // steeply, the expansion's point then ranks last). Parabola through the
+      // bracket where its vertex falls inside, else a golden-section step
+      // into the longer side (Brent's safeguard).
+      double xl = -std::numeric_limits<double>::infinity(), xr = std::numeric_limits<double>::infinity(), fl = 0, fr = 0;
+      for (const auto& p : pts) {
+        if (p.first < xa && p.first > xl) xl = p.first, fl = nll_of(p.second);
+        if (p.first > xa && p.first < xr) xr = p.first, fr = nll_of(p.second);
+      }
+      if (!std::isfinite(xl) || !std::isfinite(xr)) {
+        xn = stats::parabola_vertex(xa, fa, xb, fb, xc, fc);
+        if (!std::isfinite(xn)) xn = xa;
+      } else {
+        xn = stats::parabola_vertex(xl, fl, xa, fa, xr, fr);
+        const double tol = 1e-3;
+        if (!std::isfinite(xn) || !(xn > xl + tol) || !(xn < xr - tol) || std::fabs(xn - xa) < tol)
+          xn = xr - xa > xa - xl ? xa + 0.381966 * (xr - xa) : xa - 0.381966 * (xa - xl);
+      }
+    } else {
+      xn = stats::parabola_vertex(xa, fa, xb, fb, xc, fc);
+      if (!std::isfinite(xn)) xn = xa;
+    }
     xn = std::clamp(xn, alpha_min, 3.0);
     bool seen = false;
     for (const auto& p : pts) seen = seen || std::fabs(p.first - xn) < 1e-3;
@@ -82,6 +100,8 @@ Profile profile(const std::function<PemBaseline(double)>& eval, const PemBaselin
   out.half_width = stats::profile_interval(xs, ys).half_width;
   return out;
 }
+
+namespace {
 
 // Runs f(0..n-1) on up to hardware_concurrency threads (each `pem` fit is
 // independent and reads the prepared data only); the first exception is
@@ -137,7 +157,7 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
     const PemBaseline base = fit_default_method(prep, acc.empty() ? nullptr : &acc, &train, &start);
     const bool joint = !acc_with.empty();  // the accepted amplitudes differ with the candidate
     const PemBaseline base_with = joint ? fit_default_method(prep, &acc_with, &train, &base) : base;
-    const auto pr = profile([&](double a) { return fit_at(a, &train, base_with); }, base_with);
+    const auto pr = profile_amplitude([&](double a) { return fit_at(a, &train, base_with); }, base_with);
     evals[ku] = (joint ? 2 : 1) + fits_per_eval * pr.evaluations;
     if (!base.has_likelihood || !pr.fit.has_likelihood) return;
     auto test_nll = [&](const Correction* c, const PemBaseline& f) {
@@ -226,6 +246,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     // then these values of the first shape parameter at the best's others.
     std::vector<std::vector<double>> shapes{};
     std::vector<double> then_first{};
+    double second_step = 0.0;  // LikelihoodPlan::second_step
     // > 0: the direction is this fixed gain, not the equation-error one
     // (correction at α = extension_correction at α × unit_scale).
     double fixed_gain = 0.0, unit_scale = 1.0, alpha_min = -2.0;
@@ -246,6 +267,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     k.fixed_gain = plan.gain_per_unit;
     k.alpha_min = plan.alpha_min;
     k.then_first = plan.then_first;
+    k.second_step = plan.second_step;
     if (k.shapes.empty()) k.shapes = {c.setting};
     const std::vector<double> zero_gains(m->gains().size(), 0.0);
     k.model_based = !m->model_correction(d, c.setting, zero_gains, prep.pem.d, prep.pem.k).empty();
@@ -367,7 +389,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
         const auto others = sum_of(list, j, fit);
         const double a0 = list[j].alpha, step = 0.5 * std::max(std::fabs(a0), 0.2);
         const auto& c = cands[list[j].cand];
-        const auto pr = profile([&](double t) { return fit_at(c, a0 + t * step, others, nullptr, fit); }, fit);
+        const auto pr = profile_amplitude([&](double t) { return fit_at(c, a0 + t * step, others, nullptr, fit); }, fit);
         st.evaluations += passes(c) * pr.evaluations;
         list[j].half_width = pr.half_width * step;
         if (!(nll_of(pr.fit) < nll_of(fit))) continue;
@@ -400,13 +422,13 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     std::vector<std::pair<std::size_t, std::size_t>> jobs;
     for (std::size_t t = 0; t < todo.size(); ++t)
       for (std::size_t h = 0; h < cands[todo[t]].shapes.size(); ++h) jobs.emplace_back(t, h);
-    std::vector<Profile> job_profiles(jobs.size());
+    std::vector<AmplitudeProfile> job_profiles(jobs.size());
     parallel_for(jobs.size(), [&](std::size_t j) {
       Cand c = cands[todo[jobs[j].first]];
       if (c.shapes.size() > 1) set_shape(c, c.shapes[jobs[j].second]);  // one shape: set once, above
-      job_profiles[j] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+      job_profiles[j] = profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
     });
-    std::vector<Profile> profiles(todo.size());
+    std::vector<AmplitudeProfile> profiles(todo.size());
     std::vector<int> best_job(todo.size(), -1);
     for (std::size_t j = 0; j < jobs.size(); ++j) {
       const auto t = jobs[j].first;
@@ -440,11 +462,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
           shape[0] = v;
           more.emplace_back(t, std::move(shape));
         }
-      std::vector<Profile> got(more.size());
+      std::vector<AmplitudeProfile> got(more.size());
       parallel_for(more.size(), [&](std::size_t m) {
         Cand c = cands[todo[more[m].first]];
         set_shape(c, more[m].second);
-        got[m] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+        got[m] = profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
       });
       for (std::size_t m = 0; m < more.size(); ++m) {
         const auto t = more[m].first;
@@ -477,7 +499,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       pts.push_back({l[h - 1], l[h], l[h + 1]});
     }
     for (int step = 0; step < 2 && !refine.empty(); ++step) {
-      std::vector<Profile> got(refine.size());
+      std::vector<AmplitudeProfile> got(refine.size());
       std::vector<double> at(refine.size(), std::numeric_limits<double>::quiet_NaN());
       parallel_for(refine.size(), [&](std::size_t r) {
         auto p = pts[r];
@@ -492,7 +514,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
         shape.insert(shape.end(), rest[r].begin(), rest[r].end());
         set_shape(c, shape);
         at[r] = v;
-        got[r] = profile([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+        got[r] = profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
       });
       for (std::size_t r = 0; r < refine.size(); ++r) {
         if (!std::isfinite(at[r])) continue;
@@ -503,6 +525,59 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
           profiles[t] = got[r];
           best_shape[t] = {at[r]};
           best_shape[t].insert(best_shape[t].end(), rest[r].begin(), rest[r].end());
+        }
+      }
+    }
+    // Along the second shape parameter at the best first (a plan's
+    // second_step: the directional reflex's direction, profiled 45° apart):
+    // ± the step, then the parabola's vertex between them when the three
+    // bend upwards; the best kept. Hidden directional reflex 1.5, seeds
+    // 5000-5006: direction errors up to 21° with K11 +51 % where the delay
+    // and the gain were near the truth (docs/diagnosis.md, "Direction-dependent reflex").
+    {
+      auto profile_at = [&](std::size_t t, const std::vector<double>& shape) {
+        Cand c = cands[todo[t]];
+        set_shape(c, shape);
+        return profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+      };
+      std::vector<std::pair<std::size_t, std::vector<double>>> side;
+      for (std::size_t t = 0; t < todo.size(); ++t)
+        if (const double h = cands[todo[t]].second_step; h > 0 && best_shape[t].size() >= 2)
+          for (const double sgn : {-1.0, 1.0}) {
+            auto sh = best_shape[t];
+            sh[1] += sgn * h;
+            side.emplace_back(t, std::move(sh));
+          }
+      std::vector<AmplitudeProfile> got(side.size());
+      parallel_for(side.size(), [&](std::size_t m) { got[m] = profile_at(side[m].first, side[m].second); });
+      std::vector<std::pair<std::size_t, std::vector<double>>> vertex;
+      for (std::size_t m = 0; m + 1 < side.size(); m += 2) {
+        const auto t = side[m].first;
+        const double h = cands[todo[t]].second_step, x0 = best_shape[t][1];
+        const double fm = nll_of(got[m].fit), f0 = nll_of(profiles[t].fit), fp = nll_of(got[m + 1].fit);
+        st.evaluations += passes(cands[todo[t]]) * (got[m].evaluations + got[m + 1].evaluations);
+        if (std::isfinite(fm) && std::isfinite(f0) && std::isfinite(fp) && fm + fp - 2 * f0 > 0) {
+          const double v = stats::parabola_vertex(x0 - h, fm, x0, f0, x0 + h, fp);
+          if (std::isfinite(v) && v > x0 - h && v < x0 + h && std::fabs(v - x0) > 1e-3) {
+            auto sh = best_shape[t];
+            sh[1] = v;
+            vertex.emplace_back(t, std::move(sh));
+          }
+        }
+        for (const std::size_t q : {m, m + 1})
+          if (nll_of(got[q].fit) < nll_of(profiles[t].fit)) {
+            profiles[t] = got[q];
+            best_shape[t] = side[q].second;
+          }
+      }
+      std::vector<AmplitudeProfile> got_v(vertex.size());
+      parallel_for(vertex.size(), [&](std::size_t m) { got_v[m] = profile_at(vertex[m].first, vertex[m].second); });
+      for (std::size_t m = 0; m < vertex.size(); ++m) {
+        const auto t = vertex[m].first;
+        st.evaluations += passes(cands[todo[t]]) * got_v[m].evaluations;
+        if (nll_of(got_v[m].fit) < nll_of(profiles[t].fit)) {
+          profiles[t] = got_v[m];
+          best_shape[t] = vertex[m].second;
         }
       }
     }

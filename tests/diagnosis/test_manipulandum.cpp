@@ -58,6 +58,40 @@ Limit limit_of(const Outcome& o, const sim::HiddenEffect& e) {
 
 }  // namespace
 
+// The amplitude profile on analytic NLL curves (no fits: the evaluation
+// returns the curve's value as the fit's likelihood).
+namespace {
+PemBaseline nll_point(double v) {
+  PemBaseline b;
+  b.available = b.has_likelihood = true;
+  b.neg_log_likelihood = v;
+  return b;
+}
+}  // namespace
+
+TEST_CASE("manipulandum: the amplitude profile finds a parabola's minimum in one step, as before") {
+  // NLL = 100 + 40 (α − 0.7)²: the parabola through α = 0, 1, 2 is the curve.
+  const auto pr = profile_amplitude([](double a) { return nll_point(100.0 + 40.0 * (a - 0.7) * (a - 0.7)); }, nll_point(100.0 + 40.0 * 0.49));
+  CHECK(pr.alpha == Approx(0.7).margin(1e-9));
+  CHECK(pr.evaluations == 3);  // α = 1, 2, the vertex; the second step finds it seen
+  // 2 ΔNLL ≤ χ²₁(0.95) = 3.841458820694124 (scipy.stats.chi2.ppf(0.95, 1)): α ± √(3.8415 / 80)
+  CHECK(pr.half_width == Approx(std::sqrt(3.841458820694124 / 80.0)).epsilon(1e-6));
+}
+
+TEST_CASE("manipulandum: the amplitude profile steps past a concave start to the minimum beyond") {
+  // NLL = α⁴/4 − 0.8 α³: NLL' = α² (α − 2.4), minimum at α = 2.4; concave on
+  // (0, 1.6), so α = 0, 1, 2 (0, −0.55, −2.4) bend the wrong way and their
+  // parabola's vertex is a maximum. The delayed copies' profiles look like
+  // this (docs/diagnosis.md, "Direction-dependent reflex"); the profile used
+  // to stop at α = 2.
+  auto f = [](double a) { return a * a * a * a / 4.0 - 0.8 * a * a * a; };
+  const auto pr = profile_amplitude([&](double a) { return nll_point(f(a)); }, nll_point(f(0.0)), 0.0);
+  INFO("alpha " << pr.alpha << " after " << pr.evaluations << " evaluations");
+  CHECK(pr.alpha == Approx(2.4).margin(0.1));
+  CHECK(pr.fit.neg_log_likelihood < f(2.0) - 0.3);  // f(2) = −2.4, f(2.4) = −2.765
+  CHECK(pr.evaluations <= 5);
+}
+
 TEST_CASE("manipulandum: configuration_difference names the first differing field") {
   estimation::SessionInfo a, b;
   CHECK(configuration_difference(a, b).empty());
@@ -766,7 +800,7 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
                 std::fprintf(stderr, "; truth %s %.4g %s its interval", mp.param.c_str(), mp.truth,
                              mp.truth >= p.est.lo && mp.truth <= p.est.hi ? "inside" : "outside");
         if (!eff.empty() && eff.front().mechanism == sim::HiddenMechanism::reflex_dir)
-          std::fprintf(stderr, "; truth direction %.4g", o.draw.reflex_direction_rad);
+          std::fprintf(stderr, "; truth direction %.4g delay %.4g", o.draw.reflex_direction_rad, o.draw.reflex_delay_s);
         std::fprintf(stderr, "; err D11 %+.3f D22 %+.3f K11 %+.3f K22 %+.3f |D| %.3f |K| %.3f", rel(dd(0, 0), dt(0, 0)),
                      rel(dd(1, 1), dt(1, 1)), rel(k(0, 0), kt(0, 0)), rel(k(1, 1), kt(1, 1)), frob(dd, dt), frob(k, kt));
         std::fprintf(stderr, "\n");

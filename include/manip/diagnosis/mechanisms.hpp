@@ -51,12 +51,15 @@ class Mechanism {
   // alpha_min: the profiled amplitude's lower bound (one-sided mechanisms:
   // 0, their opposite direction is a shape of its own). then_first: a second
   // stage, these values of the first shape parameter at the best shape's
-  // others (the best of all is refined along it).
+  // others (the best of all is refined along it). second_step > 0: then the
+  // second shape parameter at the best first, ± this step and the
+  // parabola's vertex between them (the directional reflex's direction).
   struct LikelihoodPlan {
     std::vector<std::vector<double>> shapes;
     double gain_per_unit = 0.0;
     double alpha_min = -2.0;
     std::vector<double> then_first{};
+    double second_step = 0.0;
   };
   // `setting`: the equation error's best shape (a plan may profile around it).
   [[nodiscard]] virtual LikelihoodPlan likelihood_plan(const Dataset&, std::span<const double> /*setting*/) const { return {}; }
