@@ -58,7 +58,8 @@ namespace manip::diagnosis {
 // the parabola's vertex there is its maximum, at α < 0, and the profile
 // ended at α = 2 (gain 1.00 against the hidden 1.5) in 5 of the 6 named
 // sessions of seeds 5000-5006 (docs/diagnosis.md, "Direction-dependent
-// reflex"). Convex starts run exactly as before.
+// reflex"). A profile whose three best points bend upwards at every step
+// runs exactly as before.
 // alpha_min: the amplitude's lower bound (a one-sided mechanism's negative
 // amplitude is its opposite direction, profiled on its own).
 struct AmplitudeProfile {
