@@ -440,6 +440,20 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     }
     std::vector<std::vector<double>> best_shape(todo.size());
     for (std::size_t t = 0; t < todo.size(); ++t) best_shape[t] = cands[todo[t]].shapes[jobs[static_cast<std::size_t>(best_job[t])].second];
+    // The shape searches below: one profile of candidate t at a shape, and
+    // its bookkeeping (evaluations counted, the best profile and shape kept).
+    auto profile_at = [&](std::size_t t, const std::vector<double>& shape) {
+      Cand c = cands[todo[t]];
+      set_shape(c, shape);
+      return profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+    };
+    auto keep_if_better = [&](std::size_t t, const AmplitudeProfile& pr, const std::vector<double>& shape) {
+      st.evaluations += passes(cands[todo[t]]) * pr.evaluations;
+      if (nll_of(pr.fit) < nll_of(profiles[t].fit)) {
+        profiles[t] = pr;
+        best_shape[t] = shape;
+      }
+    };
     // The profiled points along the first shape parameter at the best
     // shape's other parameters: (first parameter, NLL) per candidate.
     std::vector<std::vector<std::pair<double, double>>> line(todo.size());
@@ -463,19 +477,10 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
           more.emplace_back(t, std::move(shape));
         }
       std::vector<AmplitudeProfile> got(more.size());
-      parallel_for(more.size(), [&](std::size_t m) {
-        Cand c = cands[todo[more[m].first]];
-        set_shape(c, more[m].second);
-        got[m] = profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
-      });
+      parallel_for(more.size(), [&](std::size_t m) { got[m] = profile_at(more[m].first, more[m].second); });
       for (std::size_t m = 0; m < more.size(); ++m) {
-        const auto t = more[m].first;
-        st.evaluations += passes(cands[todo[t]]) * got[m].evaluations;
-        line[t].emplace_back(more[m].second[0], nll_of(got[m].fit));
-        if (nll_of(got[m].fit) < nll_of(profiles[t].fit)) {
-          profiles[t] = got[m];
-          best_shape[t] = more[m].second;
-        }
+        line[more[m].first].emplace_back(more[m].second[0], nll_of(got[m].fit));
+        keep_if_better(more[m].first, got[m], more[m].second);
       }
     }
     // Along the first shape parameter (the reflex's delays, 5 ms apart; the
@@ -500,6 +505,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     }
     for (int step = 0; step < 2 && !refine.empty(); ++step) {
       std::vector<AmplitudeProfile> got(refine.size());
+      std::vector<std::vector<double>> shapes(refine.size());
       std::vector<double> at(refine.size(), std::numeric_limits<double>::quiet_NaN());
       parallel_for(refine.size(), [&](std::size_t r) {
         auto p = pts[r];
@@ -509,23 +515,15 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
         if (!std::isfinite(v) || !(v > lo) || !(v < hi)) return;
         for (const auto& q : p)
           if (std::fabs(q.first - v) < 2e-4) return;  // already profiled there (within a sample at 4 kHz)
-        Cand c = cands[todo[refine[r]]];
-        std::vector<double> shape{v};
-        shape.insert(shape.end(), rest[r].begin(), rest[r].end());
-        set_shape(c, shape);
+        shapes[r] = {v};
+        shapes[r].insert(shapes[r].end(), rest[r].begin(), rest[r].end());
         at[r] = v;
-        got[r] = profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+        got[r] = profile_at(refine[r], shapes[r]);
       });
       for (std::size_t r = 0; r < refine.size(); ++r) {
         if (!std::isfinite(at[r])) continue;
-        const auto t = refine[r];
-        st.evaluations += passes(cands[todo[t]]) * got[r].evaluations;
         pts[r].emplace_back(at[r], nll_of(got[r].fit));
-        if (nll_of(got[r].fit) < nll_of(profiles[t].fit)) {
-          profiles[t] = got[r];
-          best_shape[t] = {at[r]};
-          best_shape[t].insert(best_shape[t].end(), rest[r].begin(), rest[r].end());
-        }
+        keep_if_better(refine[r], got[r], shapes[r]);
       }
     }
     // Along the second shape parameter at the best first (a plan's
@@ -535,11 +533,6 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     // 5000-5006: direction errors up to 21° with K11 +51 % where the delay
     // and the gain were near the truth (docs/diagnosis.md, "Direction-dependent reflex").
     {
-      auto profile_at = [&](std::size_t t, const std::vector<double>& shape) {
-        Cand c = cands[todo[t]];
-        set_shape(c, shape);
-        return profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
-      };
       std::vector<std::pair<std::size_t, std::vector<double>>> side;
       for (std::size_t t = 0; t < todo.size(); ++t)
         if (const double h = cands[todo[t]].second_step; h > 0 && best_shape[t].size() >= 2)
@@ -555,7 +548,6 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
         const auto t = side[m].first;
         const double h = cands[todo[t]].second_step, x0 = best_shape[t][1];
         const double fm = nll_of(got[m].fit), f0 = nll_of(profiles[t].fit), fp = nll_of(got[m + 1].fit);
-        st.evaluations += passes(cands[todo[t]]) * (got[m].evaluations + got[m + 1].evaluations);
         if (std::isfinite(fm) && std::isfinite(f0) && std::isfinite(fp) && fm + fp - 2 * f0 > 0) {
           const double v = stats::parabola_vertex(x0 - h, fm, x0, f0, x0 + h, fp);
           if (std::isfinite(v) && v > x0 - h && v < x0 + h && std::fabs(v - x0) > 1e-3) {
@@ -564,22 +556,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
             vertex.emplace_back(t, std::move(sh));
           }
         }
-        for (const std::size_t q : {m, m + 1})
-          if (nll_of(got[q].fit) < nll_of(profiles[t].fit)) {
-            profiles[t] = got[q];
-            best_shape[t] = side[q].second;
-          }
+        for (const std::size_t q : {m, m + 1}) keep_if_better(t, got[q], side[q].second);
       }
       std::vector<AmplitudeProfile> got_v(vertex.size());
       parallel_for(vertex.size(), [&](std::size_t m) { got_v[m] = profile_at(vertex[m].first, vertex[m].second); });
-      for (std::size_t m = 0; m < vertex.size(); ++m) {
-        const auto t = vertex[m].first;
-        st.evaluations += passes(cands[todo[t]]) * got_v[m].evaluations;
-        if (nll_of(got_v[m].fit) < nll_of(profiles[t].fit)) {
-          profiles[t] = got_v[m];
-          best_shape[t] = vertex[m].second;
-        }
-      }
+      for (std::size_t m = 0; m < vertex.size(); ++m) keep_if_better(vertex[m].first, got_v[m], vertex[m].second);
     }
     for (std::size_t t = 0; t < todo.size(); ++t) {
       const std::size_t i = todo[t];
