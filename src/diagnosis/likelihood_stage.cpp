@@ -46,48 +46,58 @@ AmplitudeProfile profile_amplitude(const std::function<PemBaseline(double)>& eva
   at(1.0);
   at(nll_of(pts[1].second) < nll_of(fit0) ? 2.0 : alpha_min <= -1.0 ? -1.0 : 0.5 * (alpha_min + 1.0));
   auto by_nll = [](const auto& x, const auto& y) { return nll_of(x.second) < nll_of(y.second); };
-  bool expanded = false;
+  bool expanded = false, last_failed = false;
   for (int step = 0; step < (expanded ? 3 : 2); ++step) {
     std::sort(pts.begin(), pts.end(), by_nll);
     const double xa = pts[0].first, xb = pts[1].first, xc = pts[2].first;
     const double fa = nll_of(pts[0].second), fb = nll_of(pts[1].second), fc = nll_of(pts[2].second);
     if (!std::isfinite(fa) || !std::isfinite(fb) || !std::isfinite(fc)) break;
-    // Second divided difference: > 0 where the parabola has a minimum.
-    const double curvature = ((fc - fa) / (xc - xa) - (fb - fa) / (xb - xa)) / (xc - xb);
+    // The best point's nearest profiled neighbours in α, one on each side
+    // where it has one (then they bracket the minimum).
+    double xl = -std::numeric_limits<double>::infinity(), xr = std::numeric_limits<double>::infinity(), fl = 0, fr = 0;
+    for (const auto& p : pts) {
+      if (p.first < xa && p.first > xl) xl = p.first, fl = nll_of(p.second);
+      if (p.first > xa && p.first < xr) xr = p.first, fr = nll_of(p.second);
+    }
     double xn;
-    if (!(curvature > 0.0) && !expanded) {
-      const double nearest = std::fabs(xb - xa) < std::fabs(xc - xa) ? xb : xc;
-      xn = xa + (xa - nearest);
-      expanded = true;
-    } else if (expanded) {
-      // After the outward step: the best and its neighbours in α bracket the
-      // minimum (the three best may not: past the best the NLL can rise
-      // steeply, the expansion's point then ranks last). Parabola through the
-      // bracket where its vertex falls inside, else a golden-section step
-      // into the longer side (Brent's safeguard).
-      double xl = -std::numeric_limits<double>::infinity(), xr = std::numeric_limits<double>::infinity(), fl = 0, fr = 0;
-      for (const auto& p : pts) {
-        if (p.first < xa && p.first > xl) xl = p.first, fl = nll_of(p.second);
-        if (p.first > xa && p.first < xr) xr = p.first, fr = nll_of(p.second);
-      }
-      if (!std::isfinite(xl) || !std::isfinite(xr)) {
+    if (std::isfinite(xl) && std::isfinite(xr)) {
+      // Bracketed: the parabola through the bracket where its vertex falls
+      // inside it, else a golden-section step into the longer side (Brent's
+      // safeguard). The three best by NLL need not bracket: past the best the
+      // NLL can rise steeply (a delayed copy's correction diverges as
+      // g_app → 1) and the point there ranks last. Hidden early feedback 1.0,
+      // seed 2: NLL 0, −5.3, −10.4, +68 at α = 0, 1, 2, 3; the three best's
+      // vertex lay beyond 3, was clamped onto it, and the profile stopped at
+      // 2 without a look between 2 and 3. A parabolic step that did not lower
+      // the NLL is followed by a golden one: the wall dominates the parabola,
+      // which keeps stepping to the other side (feedback 1.5, seed 1: α =
+      // 1.62, then 1.88 from the best α = 2; the golden step looks at 2.38).
+      xn = stats::parabola_vertex(xl, fl, xa, fa, xr, fr);
+      const double tol = 1e-3;
+      if (last_failed || !std::isfinite(xn) || !(xn > xl + tol) || !(xn < xr - tol))
+        xn = xr - xa > xa - xl ? xa + 0.381966 * (xr - xa) : xa - 0.381966 * (xa - xl);
+    } else {
+      // The best at an end of the profiled range. Second divided difference
+      // of the three best: > 0 where their parabola has a minimum (beyond
+      // the best: an extrapolation, clamped below). Otherwise the descent
+      // steepens towards the best: one step outward by its distance to the
+      // nearest other point, and one more step after it.
+      const double curvature = ((fc - fa) / (xc - xa) - (fb - fa) / (xb - xa)) / (xc - xb);
+      if (curvature > 0.0 || expanded) {
         xn = stats::parabola_vertex(xa, fa, xb, fb, xc, fc);
         if (!std::isfinite(xn)) xn = xa;
       } else {
-        xn = stats::parabola_vertex(xl, fl, xa, fa, xr, fr);
-        const double tol = 1e-3;
-        if (!std::isfinite(xn) || !(xn > xl + tol) || !(xn < xr - tol) || std::fabs(xn - xa) < tol)
-          xn = xr - xa > xa - xl ? xa + 0.381966 * (xr - xa) : xa - 0.381966 * (xa - xl);
+        const double nearest = std::fabs(xb - xa) < std::fabs(xc - xa) ? xb : xc;
+        xn = xa + (xa - nearest);
+        expanded = true;
       }
-    } else {
-      xn = stats::parabola_vertex(xa, fa, xb, fb, xc, fc);
-      if (!std::isfinite(xn)) xn = xa;
     }
     xn = std::clamp(xn, alpha_min, 3.0);
     bool seen = false;
     for (const auto& p : pts) seen = seen || std::fabs(p.first - xn) < 1e-3;
     if (seen) break;
     at(xn);
+    last_failed = !(nll_of(pts.back().second) < fa);
   }
   std::sort(pts.begin(), pts.end(), by_nll);
   out.alpha = pts[0].first;

@@ -47,19 +47,25 @@ namespace manip::diagnosis {
 // Profile of the negative log-likelihood in the amplitude α (D, K and the
 // noise model re-fitted at every α). The correction enters the model's input
 // linearly, so NLL(α) is close to a parabola: α = 0 (given), 1, then 2 or −1
-// towards the descent, then two steps of successive parabolic interpolation
-// through the three best points, α clamped to [−2, 3]. Where the three best
-// points bend the other way (no minimum between or beyond them: the descent
-// steepens towards the best, an end point), the step goes outward from the
-// best by its distance to the nearest other point, and one more parabolic
-// step follows. The delayed copies' corrections are far from linear in α
-// (a one-sided copy's intrinsic gain is α/(4 − α)): hidden directional
-// reflex 1.5, seed 5003, NLL −30 659.9, −30 674.8, −30 695.1 at α = 0, 1, 2;
-// the parabola's vertex there is its maximum, at α < 0, and the profile
-// ended at α = 2 (gain 1.00 against the hidden 1.5) in 5 of the 6 named
-// sessions of seeds 5000-5006 (docs/diagnosis.md, "Direction-dependent
-// reflex"). A profile whose three best points bend upwards at every step
-// runs exactly as before.
+// towards the descent, then two steps, α clamped to [−2, 3]:
+// - the best point between two profiled ones (bracketed): the parabola
+//   through the best and its neighbours in α where its vertex falls inside,
+//   else, or after a parabolic step that did not lower the NLL, a
+//   golden-section step into the longer side (Brent's safeguard);
+// - the best at an end of the profiled range: the parabola through the three
+//   best (an extrapolation) where it bends upwards; where it bends the other
+//   way (the descent steepens towards the best) one step outward by the best's
+//   distance to the nearest other point, and one more step after it.
+// On near-parabolic profiles (realistic noise) the three best are the bracket
+// and every step is the plain parabolic one. The delayed copies' profiles are
+// far from parabolic (a one-sided copy's intrinsic gain is α/(4 − α)): hidden
+// directional reflex 1.5, seed 5003, NLL −30 659.9, −30 674.8, −30 695.1 at
+// α = 0, 1, 2 bend downwards and the profile used to end at α = 2 (gain 1.00
+// against the hidden 1.5; docs/diagnosis.md, "Amplitude profile"). Noise-free
+// sessions' `pem` fits converge loosely off the optimum (NLL 0, +266, +246 at
+// α = 0, 1, −1, then +1 289 at α = 0.36): there an outward step from an
+// interior best only cost fits (a noise-free test 311 → 401 s), the bracket
+// steps do not (227 s).
 // alpha_min: the amplitude's lower bound (a one-sided mechanism's negative
 // amplitude is its opposite direction, profiled on its own).
 struct AmplitudeProfile {
