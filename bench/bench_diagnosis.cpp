@@ -19,6 +19,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "manip/common/cli.hpp"
 #include "manip/diagnosis/likelihood_stage.hpp"
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/logging/session_stream.hpp"
@@ -38,7 +39,9 @@ double median(std::vector<double> v) {
 }
 }  // namespace
 
-int main(int argc, char** argv) {
+// Bad input (a missing or unreadable --log) ends with one line and its exit
+// code (docs/exit-codes.md), as in the apps.
+int run_bench(int argc, char** argv) {
   using namespace manip;
   CLI::App app{"bench_diagnosis: wall time of a full manipulandum diagnosis"};
   std::string log, hidden = "delay:0.002";
@@ -88,3 +91,5 @@ int main(int argc, char** argv) {
   if (generated) std::filesystem::remove(log);
   return 0;
 }
+
+int main(int argc, char** argv) { return manip::cli::run_main("bench_diagnosis", run_bench, argc, argv); }
