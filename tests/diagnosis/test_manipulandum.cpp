@@ -563,9 +563,10 @@ TEST_CASE("manipulandum: hidden early feedback 0.5 at 60-100 ms, noise-free, is 
   c.noise = sim::parse_noise_level("none");
   // Noise-free `pem` fits converge slowly (~34 Fisher-scoring iterations a
   // fit against ~2.5 with realistic noise, some stopping at the 80 allowed):
-  // 3 held-out folds, 227 s alone on the 2-core machine (311 s before the
-  // amplitude profile's bracket steps, 401 s with the outward step from an
-  // interior best); the diagnosis tests' timeout is 1200 s (tests/CMakeLists.txt).
+  // 3 held-out folds, 227 s alone on the 2-core machine (311 s with the
+  // profile before its concave-start fix, 401 s while it also stepped outward
+  // from an interior best); the diagnosis tests' timeout is 1200 s
+  // (tests/CMakeLists.txt).
   c.heldout_folds = 3;
   const auto o = run_case(c);
   check_delayed_copy(c, o, "feedback_gain", 0.40, 0.05, 0.05);
