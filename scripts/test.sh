@@ -38,11 +38,11 @@ if [ "${MANIP_SKIP_SANITIZERS:-0}" != "1" ]; then
   # test of the diagnosis (the amplitude profile, the model-based
   # corrections, the delayed projection, the fixed-point steps).
   # Since 2026-12-02 also these simulation-driven cases (ASan pass with a
-  # study process beside it: 436 s, 224 s, ~155 s each; Release 7 s, 2 s,
-  # ~2 s): the group table over 5 participants and the report's truth
+  # study process beside it: 436 s, 224 s, ~155 s each; Release 7 s, 3 s,
+  # ~3 s): the group table over 5 participants and the report's truth
   # sections (their statistics and text run under the sanitizers in other
-  # cases), and three of the five importer round trips, which repeat the
-  # CSV, MAT v5 and MAT v7.3 readers of the other two and of the mapping
+  # cases), and three of the six importer round trips, which repeat the
+  # CSV, MAT v5 and MAT v7.3 readers of the other three and of the mapping
   # tests.
   asan_skip="diagnosis:(manipulandum: (a clean session|hidden|likelihood check on a short session)|planar sensor: hidden)"
   asan_skip+="|estimation:(group table over 5 simulated participants|apparent truth: only what the log carries)"
