@@ -32,16 +32,18 @@ sets=(
 )
 median() { sort -g | awk '{v[NR]=$1} END{print (NR%2)? v[(NR+1)/2] : (v[NR/2]+v[NR/2+1])/2}'; }
 ref=""
+n=0
 printf '%-9s %-62s %10s %8s\n' compiler flags "median s" "ratio"
 for s in "${sets[@]}"; do
   cxx=${s%%|*}
   flags=${s#*|}
   command -v "$cxx" >/dev/null || { printf '%-9s %-62s %10s\n' "$cxx" "$flags" "(absent)"; continue; }
-  bin="$work/k$RANDOM"
+  n=$((n + 1))
+  bin="$work/kernel$n"
   # shellcheck disable=SC2086
   "$cxx" -std=c++20 -DNDEBUG $flags $eigen "$here/sanitizer/riccati_kernel.cpp" -o "$bin"
   t=$(for _ in $(seq "$reps"); do "$bin" "$steps" | cut -d' ' -f1; done | median)
   [ -z "$ref" ] && ref=$t
   printf '%-9s %-62s %10.3f %8.1f\n' "$cxx" "$flags" "$t" "$(awk -v a="$t" -v b="$ref" 'BEGIN{print a/b}')"
 done
-echo "# $(date -u +%F) $(uname -m), $(nproc) cores; $(g++ --version | head -1); ${reps} runs x ${steps} steps" 
+echo "# $(date -u +%F) $(uname -m), $(nproc) cores; $(g++ --version | head -1); ${reps} runs x ${steps} steps"

@@ -31,15 +31,15 @@ if [ "${MANIP_SKIP_SANITIZERS:-0}" != "1" ]; then
   echo "== tests under sanitizers ==" >&2
   # The manipulandum diagnosis sessions run ~100-130 pem fits each: ~8 s of
   # CPU in Release, minutes each under ASan; the hidden-mechanism ones run
-  # in the Release pass only. So does the 50-movement likelihood-check session (27 s in Release,
-  # 606 s alone under ASan on 2026-12-02 before the numerical modules lost
-  # UBSan's alignment and null checks). Under the sanitizers stay the
-  # single-joint diagnoses and every unit test of the diagnosis (the
-  # amplitude profile, the model-based corrections, the delayed projection,
-  # the fixed-point steps) and the engine's hidden mechanisms on
-  # single-joint records. Since the numerical modules are built
-  # without those two checks (CMakeLists.txt, MANIP_SANITIZE_NUMERIC: pem's
-  # products ~2.4x faster instrumented) the report's truth sections and all
+  # in the Release pass only. So does the 50-movement likelihood-check
+  # session (27 s in Release, 606 s alone under ASan on 2026-12-02 before
+  # the numerical modules lost UBSan's alignment and null checks). Under the
+  # sanitizers stay the single-joint diagnoses, every unit test of the
+  # diagnosis (the amplitude profile, the model-based corrections, the
+  # delayed projection, the fixed-point steps) and the engine's hidden
+  # mechanisms on single-joint records. Since the numerical modules are
+  # built without those two checks (CMakeLists.txt, MANIP_SANITIZE_NUMERIC:
+  # pem's products ~2.4x faster instrumented) the report's truth sections and all
   # six importer round trips are back in this pass, and so is the clean
   # manipulandum session (143 s alone, 17 s in Release): the one case that
   # takes diagnose_model's manipulandum front end and likelihood stage
