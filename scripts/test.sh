@@ -6,6 +6,14 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 jobs=$(nproc)
 scripts/setup.sh
+# The sanitizer build is a unity build (CMake's CMAKE_UNITY_BUILD: up to 8
+# sources of a target per compile, headers parsed and Eigen's templates
+# instantiated once per batch): about a quarter less compile CPU
+# (docs/benchmarks.md, "Build time", 2026-12-03). The Release build stays
+# one file per compile, as a developer builds (CMakeLists.txt leaves unity
+# off, so an edit recompiles one file): it is what catches a source that
+# compiles only beside another one's includes.
+unity=-DCMAKE_UNITY_BUILD=${MANIP_UNITY_BUILD:-ON}
 echo "== build (Release, -Werror) ==" >&2
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DMANIP_WERROR=ON >/dev/null
 ninja -C build
@@ -26,7 +34,7 @@ if [ "${MANIP_SKIP_SANITIZERS:-0}" != "1" ]; then
   # at -O1).
   cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMANIP_WERROR=ON -DMANIP_SANITIZE=ON \
     -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
-    -DMANIP_BENCH=OFF >/dev/null
+    -DMANIP_BENCH=OFF "$unity" >/dev/null
   ninja -C build-asan
   echo "== tests under sanitizers ==" >&2
   # The manipulandum diagnosis sessions run ~100-130 pem fits each: ~8 s of

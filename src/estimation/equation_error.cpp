@@ -12,7 +12,6 @@
 namespace manip::estimation {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // A parameter of the identification model: element (i, j) of M (0), D (1)
 // or K (2); `sym` marks K12 = K21 shared (eq. 30).
@@ -93,7 +92,7 @@ ImpedanceEstimate fit_equation_error(std::span<const VariationalWindow> windows,
   const auto& s = svd.singularValues();
   Eigen::VectorXd inv_s2 = s.array().square().inverse().matrix();
   for (Eigen::Index i = 0; i < inv_s2.size(); ++i)
-    if (!std::isfinite(inv_s2(i))) inv_s2(i) = kNaN;
+    if (!std::isfinite(inv_s2(i))) inv_s2(i) = std::numeric_limits<double>::quiet_NaN();
   const Eigen::MatrixXd cov = svd.matrixV() * inv_s2.asDiagonal() * svd.matrixV().transpose() * sigma2;
   ImpedanceEstimate e;
   e.m_estimated = opt.estimate_m;

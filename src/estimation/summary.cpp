@@ -2,13 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "manip/estimation/uncertainty.hpp"
 
 namespace manip::estimation {
-namespace {
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-}  // namespace
 
 std::string SummaryGroup::label() const {
   return is_session() ? "session" : "angle " + std::to_string(static_cast<int>(std::lround(angle_deg)));
@@ -40,7 +38,7 @@ Summary summarise_trials(const std::string& method, const SummaryGroup& group, c
   s.d_spread = (s.d_spread / den).cwiseSqrt();
   s.k_spread = (s.k_spread / den).cwiseSqrt();
   // 95% interval of the mean over trials.
-  const double t = rs.size() > 1 ? t_quantile_975(static_cast<int>(rs.size()) - 1) / std::sqrt(n) : kNaN;
+  const double t = rs.size() > 1 ? t_quantile_975(static_cast<int>(rs.size()) - 1) / std::sqrt(n) : std::numeric_limits<double>::quiet_NaN();
   s.d_lo = s.d_nspm - t * s.d_spread;
   s.d_hi = s.d_nspm + t * s.d_spread;
   s.k_lo = s.k_npm - t * s.k_spread;

@@ -8,9 +8,6 @@
 #include <stdexcept>
 
 namespace manip::estimation {
-namespace {
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-}  // namespace
 
 double column_normalised_condition(const Eigen::MatrixXd& a) {
   Eigen::MatrixXd an = a;
@@ -37,7 +34,7 @@ double t_quantile_975(int dof) {
   static const double table[] = {12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
                                  2.201,  2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
                                  2.080,  2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042};
-  if (dof < 1) return kNaN;
+  if (dof < 1) return std::numeric_limits<double>::quiet_NaN();
   if (dof <= 30) return table[dof - 1];
   // Cornish-Fisher expansion about the normal quantile; < 1e-3 off beyond 30 dof.
   const double z = 1.959964, n = dof;

@@ -18,10 +18,6 @@
 
 namespace manip::runtime {
 using namespace manip::control;  // the loop's records and codes
-namespace {
-std::int64_t mono_ns() { return monotonic_ns(); }
-}  // namespace
-
 CommandLimits CommandLimits::from_config(const RtConfig& cfg) {
   CommandLimits l;
   l.frame = cfg.session.frame;
@@ -116,7 +112,7 @@ bool Bus::open(const std::string& url, std::string& err) {
   }
   sub_ = lcm_subscribe(lcm_->getUnderlyingLCM(), channels::kCommand, &Bus::c_on_command, this);
   if (sub_) lcm_subscription_set_queue_capacity(sub_, cfg_.bus.subscription_queue_capacity);
-  next_health_ns_ = mono_ns();
+  next_health_ns_ = monotonic_ns();
   return true;
 }
 
@@ -210,7 +206,7 @@ void Bus::track_targets(const LoopRecord& r) {
 void Bus::publish_targets() {
   publish(channels::kTargets, to_targets_message(cue_, cue_cycle_, cfg_.protocol.target_radius_m,
                                                  cfg_.session.perturbation.trigger_x2_shoulder_m, cue_seq_));
-  next_targets_ns_ = mono_ns() + 1'000'000'000;
+  next_targets_ns_ = monotonic_ns() + 1'000'000'000;
 }
 
 void Bus::publish_health() {
@@ -288,7 +284,7 @@ void Bus::poll(int timeout_ms) {
     while (handled > 0 && handled < kMaxMessagesPerPoll && lcm_->handleTimeout(0) > 0) ++handled;
   }
   drain_loop();
-  const std::int64_t now = mono_ns();
+  const std::int64_t now = monotonic_ns();
   if (now >= next_health_ns_) {
     publish_health();
     next_health_ns_ = now + static_cast<std::int64_t>(1e9 / cfg_.bus.health_rate_hz);

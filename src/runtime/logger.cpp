@@ -12,10 +12,6 @@
 
 namespace manip::runtime {
 using namespace manip::control;  // the loop's records and codes
-namespace {
-std::int64_t mono_ns() { return monotonic_ns(); }
-}  // namespace
-
 Logger::Logger(RecordQueue& queue, int fault_history_cycles, double flush_interval_s)
     : q_(queue),
       ring_(static_cast<std::size_t>(fault_history_cycles > 0 ? fault_history_cycles : 1)),
@@ -52,7 +48,7 @@ bool Logger::open(const std::string& path, const manip::session_t& session, std:
     return false;
   }
   stats_.events_in_file = events_flushed_ = w_.events_written();
-  last_flush_ns_ = mono_ns();
+  last_flush_ns_ = monotonic_ns();
   return true;
 }
 
@@ -178,7 +174,7 @@ void Logger::print_fault(const manip::fault_t& m, std::uint32_t flags) {
   // must not flood the operator's terminal; the rest is summarised.
   constexpr int kLinesPerWindow = 5;
   constexpr std::int64_t kWindowNs = 1'000'000'000;
-  const std::int64_t now = mono_ns();
+  const std::int64_t now = monotonic_ns();
   if (now - print_window_ns_ >= kWindowNs) {
     if (suppressed_in_window_ > 0)
       std::fprintf(stderr, "manip_rt: ... %lld more fault records like this (not printed; all are in the log)\n",
@@ -245,7 +241,7 @@ void Logger::handle_aux(const AuxRecord& r) {
 
 void Logger::maybe_flush(bool force) {
   if (!open_ || failed_.load(std::memory_order_relaxed)) return;
-  const std::int64_t now = mono_ns();
+  const std::int64_t now = monotonic_ns();
   if (!force && static_cast<double>(now - last_flush_ns_) * 1e-9 < flush_interval_s_) return;
   last_flush_ns_ = now;
   states_since_flush_ = 0;

@@ -7,24 +7,13 @@
 
 #include "manip/canopen/bus_load.hpp"
 #include "manip/canopen/config.hpp"
+#include "config_errors.hpp"
 #include "rig.hpp"
 
 using namespace manip::canopen;
 
-namespace {
-std::vector<std::string> errors_of(const std::string& text) {
-  CanConfig c;
-  std::vector<std::string> e;
-  CHECK_FALSE(parse_config(text, "bus.yml", c, e));
-  for (const auto& s : e) UNSCOPED_INFO(s);
-  return e;
-}
-bool has(const std::vector<std::string>& es, const std::string& s) {
-  for (const auto& e : es)
-    if (e == s) return true;
-  return false;
-}
-}  // namespace
+using canopen_test::errors_of;
+using canopen_test::has;
 
 TEST_CASE("canopen config: backend section defaults and values", "[config]") {
   const CanConfig d = canopen_test::parse_ok(canopen_test::kTwoBuses);

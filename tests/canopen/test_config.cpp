@@ -1,24 +1,13 @@
 #include <catch2/catch.hpp>
 
 #include "manip/canopen/config.hpp"
+#include "config_errors.hpp"
 #include "rig.hpp"
 
 using namespace manip::canopen;
 
-namespace {
-std::vector<std::string> errors_of(const std::string& text) {
-  CanConfig c;
-  std::vector<std::string> e;
-  CHECK_FALSE(parse_config(text, "bus.yml", c, e));
-  return e;
-}
-bool has(const std::vector<std::string>& es, const std::string& s) {
-  for (const auto& e : es) UNSCOPED_INFO(e);
-  for (const auto& e : es)
-    if (e == s) return true;
-  return false;
-}
-}  // namespace
+using canopen_test::errors_of;
+using canopen_test::has;
 
 TEST_CASE("canopen config: a valid bus.yml") {
   const auto c = canopen_test::parse_ok(canopen_test::kTwoBuses);

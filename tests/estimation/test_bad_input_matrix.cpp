@@ -30,7 +30,7 @@ namespace ec = manip::exit_code;
 
 namespace {
 
-const std::string kApp = std::string(MANIP_BINARY_DIR) + "/apps/estimate_impedance";
+const std::string kEstimateApp = std::string(MANIP_BINARY_DIR) + "/apps/estimate_impedance";
 
 struct Result {
   int code{-1};
@@ -47,7 +47,7 @@ std::string slurp(const std::string& p) {
 Result run(const std::string& args, const std::string& env = "") {
   const auto base = std::filesystem::temp_directory_path() / ("bad_input_matrix_" + std::to_string(::getpid()));
   const std::string o = base.string() + ".out", e = base.string() + ".err";
-  const int st = std::system((env + " " + kApp + " " + args + " >" + o + " 2>" + e).c_str());
+  const int st = std::system((env + " " + kEstimateApp + " " + args + " >" + o + " 2>" + e).c_str());
   Result r{WIFEXITED(st) ? WEXITSTATUS(st) : -1, slurp(o), slurp(e)};
   std::filesystem::remove(o);
   std::filesystem::remove(e);
@@ -100,7 +100,7 @@ bool good_estimated(const Result& r, const std::string& good) {
 }  // namespace
 
 TEST_CASE("estimate_impedance bad-input matrix", "[cli][bad_input]") {
-  if (!std::filesystem::exists(kApp)) {
+  if (!std::filesystem::exists(kEstimateApp)) {
     WARN("estimate_impedance not built: skipped (ninja estimate_impedance)");
     return;
   }

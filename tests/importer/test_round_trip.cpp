@@ -262,7 +262,7 @@ std::pair<std::string, std::string> export_example(const Original& o) {
   return {std::string(MANIP_SOURCE_DIR) + "/config/import-example.yaml", data};
 }
 
-struct Collector final : logging::SessionHandler {
+struct RoundTripCollector final : logging::SessionHandler {
   std::vector<manip::trial_event_t> events;
   std::int64_t states{0};
   manip::session_t session{};
@@ -352,7 +352,7 @@ void check_layout(const std::string& label, const std::pair<std::string, std::st
 
   // Events: the same trials, the same START/ONSET/END cycles (the onset rule
   // recovers the simulator's onset cycle), the same angles.
-  Collector c;
+  RoundTripCollector c;
   logging::read_log(out, c);
   CHECK(c.states == static_cast<std::int64_t>(o.states.size()));
   REQUIRE(c.events.size() == o.events.size());

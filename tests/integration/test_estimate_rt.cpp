@@ -26,7 +26,7 @@ using manip::Mat2;
 
 namespace {
 
-std::string tmp(const char* n) {
+std::string tmp_log(const char* n) {
   return (std::filesystem::temp_directory_path() / (std::string("manip_est_rt_") + n + "_" + std::to_string(::getpid()) + ".lcm"))
       .string();
 }
@@ -101,8 +101,8 @@ TEST_CASE("estimate_impedance on a manip_rt sim session matches the same person 
   }
   const RtConfig cfg = load_rt_config(std::string(MANIP_SOURCE_DIR) + "/config/rt.yaml");
   const auto t0 = std::chrono::steady_clock::now();
-  const auto ra = estimate_rendered(cfg, tmp("rendered"));
-  const auto rb = estimate_ideal(cfg, tmp("ideal"));
+  const auto ra = estimate_rendered(cfg, tmp_log("rendered"));
+  const auto rb = estimate_ideal(cfg, tmp_log("ideal"));
   const auto* sa = session_summary(ra, est::default_method());
   const auto* sb = session_summary(rb, est::default_method());
   REQUIRE(sa);
@@ -132,7 +132,7 @@ TEST_CASE("rendering study: estimate vs ideal admittance, one rendering imperfec
           "[.][rendering_study]") {
   const std::string path = std::string(MANIP_SOURCE_DIR) + "/config/rt.yaml";
   const RtConfig base = load_rt_config(path);
-  const auto ideal = estimate_ideal(base, tmp("ideal"));
+  const auto ideal = estimate_ideal(base, tmp_log("ideal"));
   const auto* si = session_summary(ideal, est::default_method());
   REQUIRE(si);
   struct Variant {
@@ -153,7 +153,7 @@ TEST_CASE("rendering study: estimate vs ideal admittance, one rendering imperfec
   msg << "ideal admittance: D " << fmt(si->d_nspm) << " K " << fmt(si->k_npm) << "\n";
   for (const auto& v : variants) {
     const RtConfig cfg = load_rt_config(path, v.ov);
-    const auto r = estimate_rendered(cfg, tmp("variant"));
+    const auto r = estimate_rendered(cfg, tmp_log("variant"));
     const auto* sv = session_summary(r, est::default_method());
     REQUIRE(sv);
     msg << v.name << ": D " << fmt(sv->d_nspm) << " K " << fmt(sv->k_npm) << "  |dD| " << (sv->d_nspm - si->d_nspm).norm()

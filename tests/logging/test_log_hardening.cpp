@@ -30,7 +30,7 @@ using Bytes = std::vector<std::uint8_t>;
 
 namespace {
 
-Bytes slurp(const std::string& p) {
+Bytes slurp_bytes(const std::string& p) {
   std::ifstream in(p, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), {}};
 }
@@ -85,7 +85,7 @@ struct Seen final : logging::SessionHandler {
   void on_warning(const std::string& m) override { warnings.push_back(m); }
 };
 
-const std::string& good_log() {
+const std::string& hardening_good_log() {
   static const std::string path = testutil::write_small_good_log("log_hardening");
   return path;
 }
@@ -93,9 +93,9 @@ const std::string& good_log() {
 // The good log's messages minus those listed (by index into its event list).
 std::vector<std::string> expected_without(const std::vector<std::size_t>& removed) {
   Seen all;
-  logging::read_log(good_log(), all);
+  logging::read_log(hardening_good_log(), all);
   REQUIRE(all.warnings.empty());
-  const auto evs = index_events(slurp(good_log()));
+  const auto evs = index_events(slurp_bytes(hardening_good_log()));
   REQUIRE(all.msgs.size() == evs.size());  // every event of the good log is a session/state/trial message
   std::vector<std::string> out;
   for (std::size_t i = 0; i < evs.size(); ++i)
@@ -119,7 +119,7 @@ bool any_warning_with(const std::vector<std::string>& w, const std::string& a, c
 }  // namespace
 
 TEST_CASE("log hardening: one flipped bit in a data length loses that event only, not the rest of the log") {
-  const Bytes good = slurp(good_log());
+  const Bytes good = slurp_bytes(hardening_good_log());
   const auto evs = index_events(good);
   // An event a quarter into the file, so that +8 MiB still lands inside it.
   std::size_t k = evs.size() / 4;
@@ -149,7 +149,7 @@ TEST_CASE("log hardening: one flipped bit in a data length loses that event only
 }
 
 TEST_CASE("log hardening: garbage with a fake event magic between events is skipped exactly, nothing else lost") {
-  const Bytes good = slurp(good_log());
+  const Bytes good = slurp_bytes(hardening_good_log());
   const auto evs = index_events(good);
   const std::size_t k = middle_event_on(evs, channels::kTrial);
   const std::size_t at = evs[k].off;  // insert just before a trial event
@@ -188,7 +188,7 @@ TEST_CASE("log hardening: garbage with a fake event magic between events is skip
 }
 
 TEST_CASE("log hardening: a truncated last event is still reported as such, after garbage too") {
-  Bytes bad = slurp(good_log());
+  Bytes bad = slurp_bytes(hardening_good_log());
   const auto evs = index_events(bad);
   bad.resize(evs.back().off + 40);  // cut inside the last event
   const auto dir = testutil::temp_dir("trunc2");
@@ -202,7 +202,7 @@ TEST_CASE("log hardening: a truncated last event is still reported as such, afte
 }
 
 TEST_CASE("log hardening: the reader never allocates for a length it has not verified") {
-  const Bytes good = slurp(good_log());
+  const Bytes good = slurp_bytes(hardening_good_log());
   const auto evs = index_events(good);
   const std::size_t k = middle_event_on(evs, channels::kState);
   const auto dir = testutil::temp_dir("alloc");
@@ -255,7 +255,7 @@ TEST_CASE("log hardening: the reader never allocates for a length it has not ver
 }
 
 TEST_CASE("log hardening: string length <= 0 in a trial or session event is a warning naming file, offset, channel") {
-  const Bytes good = slurp(good_log());
+  const Bytes good = slurp_bytes(hardening_good_log());
   const auto evs = index_events(good);
   const auto dir = testutil::temp_dir("strlen");
   // trial_event_t payload: 8-byte fingerprint, 78 bytes of fixed fields, then
@@ -432,7 +432,7 @@ TEST_CASE("safe_decode: bad string lengths and array counts are refused before t
 }
 
 TEST_CASE("log hardening: zeros after the last event (a preallocated file) are skipped garbage, not a truncated event") {
-  Bytes bad = slurp(good_log());
+  Bytes bad = slurp_bytes(hardening_good_log());
   const auto evs = index_events(bad);
   const std::size_t size = bad.size();
   bad.resize(size + 4096, 0);

@@ -31,7 +31,7 @@ struct Run {
   SessionDesign design;
 };
 
-Run run(const std::vector<HiddenEffect>& effects, std::uint64_t hidden_seed = 2) {
+Run run_sensor(const std::vector<HiddenEffect>& effects, std::uint64_t hidden_seed = 2) {
   auto base = testutil::small_design(12);
   base.reps_per_angle = 1;
   auto hs = make_hidden_session(base, table1_person(), effects, hidden_seed);
@@ -73,7 +73,7 @@ TEST_CASE("hidden sensor: parse sensor_lag, sensor_offset, sensor_drift and refu
 TEST_CASE("hidden sensor: the admittance renders from the reading the log records (M_adm xdd + D_adm xd = f_r + u_pert)") {
   for (const char* h : {"sensor_lag:0.002", "sensor_offset:3", "sensor_drift:0.1"}) {
     INFO(h);
-    const auto r = run({parse_hidden_effect(h)});
+    const auto r = run_sensor({parse_hidden_effect(h)});
     const auto& s = r.design.session;
     double worst = 0.0;
     for (const auto& st : r.states)
@@ -84,13 +84,13 @@ TEST_CASE("hidden sensor: the admittance renders from the reading the log record
     CHECK(worst < 1e-9);
   }
   // The lagged filter starts at 0: the first reading of the session is the bias alone.
-  const auto r = run({parse_hidden_effect("sensor_lag:0.002"), parse_hidden_effect("sensor_offset:3")});
+  const auto r = run_sensor({parse_hidden_effect("sensor_lag:0.002"), parse_hidden_effect("sensor_offset:3")});
   CHECK(r.states.front().f_sensor_workspace_n[0] == Approx(3.0).margin(1e-12));
   CHECK(r.states.front().f_sensor_workspace_n[1] == Approx(3.0).margin(1e-12));
 }
 
 TEST_CASE("hidden sensor: the apparent truth stays the person's with a lag, a bias of the reading pushes the handle") {
-  static const auto clean = run({});
+  static const auto clean = run_sensor({});
   REQUIRE(clean.sum.apparent);
   const auto& k0 = clean.sum.apparent->k_npm;
   const auto& d0 = clean.sum.apparent->d_nspm;
@@ -102,7 +102,7 @@ TEST_CASE("hidden sensor: the apparent truth stays the person's with a lag, a bi
     // the person's constant inertia, and the apparent D, K with them
     // (measured here, hidden seed 2, 12 movements: 5 N offset K 25 %, D 30 %;
     // drift 0.1 N/s K 10 %, D 12 %).
-    const auto r = run({parse_hidden_effect("sensor_lag:0.003")});
+    const auto r = run_sensor({parse_hidden_effect("sensor_lag:0.003")});
     REQUIRE(r.sum.apparent);
     CHECK((r.sum.apparent->k_npm - k0).norm() < 0.02 * k0.norm());
     CHECK((r.sum.apparent->d_nspm - d0).norm() < 0.02 * d0.norm());
@@ -110,7 +110,7 @@ TEST_CASE("hidden sensor: the apparent truth stays the person's with a lag, a bi
   // An offset is a constant force on the admittance: the hand at rest in the
   // start target before the first go cue sits away from the clean session's
   // (person's K: 100-300 N/m, 5 N on both workspace axes -> centimetres).
-  const auto off = run({parse_hidden_effect("sensor_offset:5")});
+  const auto off = run_sensor({parse_hidden_effect("sensor_offset:5")});
   const std::size_t rest = 1500;  // 0.375 s: inside the first 0.4 s rest
   REQUIRE(off.states.size() > rest);
   const double dev = std::hypot(off.states[rest].x_workspace_m[0] - clean.states[rest].x_workspace_m[0],
@@ -118,7 +118,7 @@ TEST_CASE("hidden sensor: the apparent truth stays the person's with a lag, a bi
   CHECK(dev > 0.005);
   // A drift grows over the session: the deviation at the end of the last
   // trial's rest is larger than in the first.
-  const auto dr = run({parse_hidden_effect("sensor_drift:0.1")});
+  const auto dr = run_sensor({parse_hidden_effect("sensor_drift:0.1")});
   REQUIRE(dr.states.size() == clean.states.size());
   const auto dev_at = [&](std::size_t i) {
     return std::hypot(dr.states[i].x_workspace_m[0] - clean.states[i].x_workspace_m[0],
