@@ -193,19 +193,13 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
   lc.heldout_done = true;
 }
 
-std::string fmt_g4(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
-
 // A named mechanism's parameters, "name value [lo, hi] unit;" (the interval
 // for gains that have one), and as JSON by name (report.hpp's param_json).
 std::string params_text(const std::vector<ParamEstimate>& ps) {
   std::string o;
   for (const auto& p : ps) {
-    o += " " + p.name + " " + fmt_g4(p.est.value);
-    if (!p.shape && p.est.hi > p.est.lo) o += " [" + fmt_g4(p.est.lo) + ", " + fmt_g4(p.est.hi) + "]";
+    o += " " + p.name + " " + g4(p.est.value);
+    if (!p.shape && p.est.hi > p.est.lo) o += " [" + g4(p.est.lo) + ", " + g4(p.est.hi) + "]";
     o += " " + p.unit + ";";
   }
   return o;
@@ -620,7 +614,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       for (std::size_t g = sp.size(); g < sp.size() + gs.size() && lc.plausible; ++g)
         if (const auto& q = lc.params[g]; !q.plausible()) {
           lc.plausible = false;
-          lc.implausible_reason = q.name + " " + fmt_g4(q.est.value) + " " + q.unit + " outside " + fmt_g4(q.plausible_lo) + " … " + fmt_g4(q.plausible_hi);
+          lc.implausible_reason = q.name + " " + g4(q.est.value) + " " + q.unit + " outside " + g4(q.plausible_lo) + " … " + g4(q.plausible_hi);
         }
       // A person's stiffness is positive definite (the arm returns towards
       // its plan, paper §3.3 takes K symmetric): an extension whose corrected
@@ -631,7 +625,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
         const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(0.5 * (pr.fit.k + pr.fit.k.transpose()), Eigen::EigenvaluesOnly);
         if (!(es.eigenvalues()(0) > 0)) {
           lc.plausible = false;
-          lc.implausible_reason = "corrected K not positive definite (smallest eigenvalue " + fmt_g4(es.eigenvalues()(0)) + " N/m)";
+          lc.implausible_reason = "corrected K not positive definite (smallest eigenvalue " + g4(es.eigenvalues()(0)) + " N/m)";
         }
       }
       rd.candidates.push_back(std::move(lc));
@@ -723,12 +717,12 @@ std::string likelihood_text(const LikelihoodStage& s) {
         o << "  significant, NO SIGNIFICANT HELD-OUT GAIN (not accepted)";
       else if (c.significant)
         o << (!c.plausible ? "  significant, IMPLAUSIBLE (" + c.implausible_reason + ")"
-                           : (c.relevance < 1.0 ? "  significant, NEGLIGIBLE (moves D, K by " + fmt_g4(c.relevance) + " of their 95 % half-widths)"
+                           : (c.relevance < 1.0 ? "  significant, NEGLIGIBLE (moves D, K by " + g4(c.relevance) + " of their 95 % half-widths)"
                                                 : "  significant"));
       o << "  (";
       bool first = true;
       for (const auto& p : c.params) {
-        o << (first ? "" : ", ") << p.name << " " << fmt_g4(p.est.value);
+        o << (first ? "" : ", ") << p.name << " " << g4(p.est.value);
         first = false;
       }
       o << ")\n";
@@ -745,12 +739,12 @@ std::string likelihood_text(const LikelihoodStage& s) {
   } else {
     o << "  result: named";
     for (std::size_t a = 0; a < s.accepted.size(); ++a) o << (a ? ", then " : " ") << s.accepted[a];
-    o << "; NLL " << fmt_g4(s.nll_baseline) << " -> " << fmt_g4(s.nll_final) << " (" << s.evaluations << " fits of the default method)\n";
+    o << "; NLL " << g4(s.nll_baseline) << " -> " << g4(s.nll_final) << " (" << s.evaluations << " fits of the default method)\n";
     o << "  named parameters (amplitudes refitted jointly; [95 % profile-likelihood interval, the others fixed]):\n";
     for (const auto& f : s.accepted_fits) o << "    " << f.id << ":" << params_text(f.params) << "\n";
     const auto z = s.impedance();
-    o << "  corrected estimate (" << s.fit.method << " with the extension): D [" << fmt_g4(z.d(0, 0)) << " " << fmt_g4(z.d(0, 1)) << "; " << fmt_g4(z.d(1, 0)) << " "
-      << fmt_g4(z.d(1, 1)) << "] N s/m, K [" << fmt_g4(z.k(0, 0)) << " " << fmt_g4(z.k(0, 1)) << "; " << fmt_g4(z.k(1, 0)) << " " << fmt_g4(z.k(1, 1)) << "] N/m\n";
+    o << "  corrected estimate (" << s.fit.method << " with the extension): D [" << g4(z.d(0, 0)) << " " << g4(z.d(0, 1)) << "; " << g4(z.d(1, 0)) << " "
+      << g4(z.d(1, 1)) << "] N s/m, K [" << g4(z.k(0, 0)) << " " << g4(z.k(0, 1)) << "; " << g4(z.k(1, 0)) << " " << g4(z.k(1, 1)) << "] N/m\n";
   }
   return o.str();
 }
@@ -897,7 +891,7 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
   const double pulse_s = prep.info.perturbation.duration_s;
   const auto named = [&](const char* id) { return std::find(c.named.begin(), c.named.end(), id) != c.named.end(); };
   if (!prep.data.planar.empty() && pulse_s >= 0.1 && !named("short_latency_reflex") && !named("directional_reflex"))
-    c.protocol_note = "under this session's " + fmt_g4(pulse_s * 1e3) +
+    c.protocol_note = "under this session's " + g4(pulse_s * 1e3) +
                       " ms pulse a short-latency reflex within the window is part of D, K (and looks like an inertia change); "
                       "a session with a 50 ms, 20 N pulse tells it apart (manip_rt: perturbation.duration_s, amplitude_n; "
                       "docs/diagnosis.md, \"Pulse\")";
@@ -913,7 +907,7 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
       for (const auto& cs : dg.rounds.front().candidates) {
         if (cs.gain_mde.size() != 1) continue;  // one-gain mechanisms: one number says it
         // The mechanism named too: the two delayed copies share the gain's name.
-        o << " " << cs.id << " " << cs.params.back().name << " " << fmt_g4(cs.gain_mde.front()) << " " << cs.params.back().unit << ";";
+        o << " " << cs.id << " " << cs.params.back().name << " " << g4(cs.gain_mde.front()) << " " << cs.params.back().unit << ";";
       }
     o << "\n";
     if (!c.protocol_note.empty()) o << "  Not visible: " << c.protocol_note << "\n";
@@ -928,11 +922,11 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
   for (std::size_t i = 0; i < c.named_params.size() && i < c.named.size(); ++i) o << "  " << c.named[i] << ":" << params_text(c.named_params[i]) << "\n";
   if (!c.named_params.empty()) o << "  ([…]: 95 % profile-likelihood interval of the amplitude, the other named amplitudes fixed)\n";
   if (c.has_corrected)
-    o << "  corrected impedance: D [" << fmt_g4(c.corrected.d(0, 0)) << " " << fmt_g4(c.corrected.d(0, 1)) << "; " << fmt_g4(c.corrected.d(1, 0)) << " "
-      << fmt_g4(c.corrected.d(1, 1)) << "] N s/m, K [" << fmt_g4(c.corrected.k(0, 0)) << " " << fmt_g4(c.corrected.k(0, 1)) << "; " << fmt_g4(c.corrected.k(1, 0)) << " "
-      << fmt_g4(c.corrected.k(1, 1)) << "] N/m\n";
+    o << "  corrected impedance: D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; " << g4(c.corrected.d(1, 0)) << " "
+      << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " " << g4(c.corrected.k(0, 1)) << "; " << g4(c.corrected.k(1, 0)) << " "
+      << g4(c.corrected.k(1, 1)) << "] N/m\n";
   for (const auto& a : c.alternatives)
-    o << "  or, for " << a.named << ": " << a.id << " of gain " << fmt_g4(a.gain) << " x the impedance at " << fmt_g4(a.delay_s * 1e3) << " ms (" << a.why
+    o << "  or, for " << a.named << ": " << a.id << " of gain " << g4(a.gain) << " x the impedance at " << g4(a.delay_s * 1e3) << " ms (" << a.why
       << "; docs/diagnosis.md)\n";
   if (!c.protocol_note.empty()) o << "  Not visible: " << c.protocol_note << "\n";
   return o.str();

@@ -1,4 +1,5 @@
 #include "manip/diagnosis/manipulandum.hpp"
+#include "manip/diagnosis/report.hpp"
 #include "manip/diagnosis/stats.hpp"
 
 #include <algorithm>
@@ -1380,13 +1381,8 @@ std::vector<double> default_window_edges(double t_est_s) {
 }
 
 namespace {
-std::string f4(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
 std::string mat(const Eigen::Matrix2d& m) {
-  return "[" + f4(m(0, 0)) + " " + f4(m(0, 1)) + "; " + f4(m(1, 0)) + " " + f4(m(1, 1)) + "]";
+  return "[" + g4(m(0, 0)) + " " + g4(m(0, 1)) + "; " + g4(m(1, 0)) + " " + g4(m(1, 1)) + "]";
 }
 nlohmann::json jmat(const Eigen::Matrix2d& m) { return {m(0, 0), m(0, 1), m(1, 0), m(1, 1)}; }
 }  // namespace
@@ -1406,8 +1402,8 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
     o << "  default refitted with the extension (u_pert corrected by the accepted terms, their gains from above): D " << mat(prep.pem_extended.d)
       << "  K " << mat(prep.pem_extended.k) << "\n";
   if (dg.misfit_found() && prep.refined.available) {
-    o << "  default refitted with the extension's amplitude refined by its likelihood (gains x " << f4(prep.refined.alpha)
-      << "; -log L " << f4(prep.refined.nll_baseline) << " without, " << f4(prep.refined.nll_alpha1) << " at x1, " << f4(prep.refined.nll_best)
+    o << "  default refitted with the extension's amplitude refined by its likelihood (gains x " << g4(prep.refined.alpha)
+      << "; -log L " << g4(prep.refined.nll_baseline) << " without, " << g4(prep.refined.nll_alpha1) << " at x1, " << g4(prep.refined.nll_best)
       << " at the optimum): D " << mat(prep.refined.fit.d) << "  K " << mat(prep.refined.fit.k) << "   <- the corrected estimate\n";
     for (const auto& a : dg.accepted)
       for (const auto& p : dg.final_params)
@@ -1417,7 +1413,7 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
                 if (gi.name == p.name) return true;
               return false;
             }) != lib.end())
-          o << "    " << a << ": " << p.name << " = " << f4(p.est.value * prep.refined.alpha) << " " << p.unit << " (refined by the likelihood)\n";
+          o << "    " << a << ": " << p.name << " = " << g4(p.est.value * prep.refined.alpha) << " " << p.unit << " (refined by the likelihood)\n";
   }
   const auto edges = default_window_edges(prep.t_est_s);
   const auto wm = window_misfit(prep.data, dg, lib, edges);
@@ -1442,11 +1438,11 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
                   {"mean_after_n", {w.mean_after[0], w.mean_after[1]}}});
   }
   const auto sd = sensor_disagreement(prep.data);
-  o << "\nEq. 21 vs the force sensor: disagreement RMS " << f4(100 * sd.rms_share)
+  o << "\nEq. 21 vs the force sensor: disagreement RMS " << g4(100 * sd.rms_share)
     << " % of Δu_ext's RMS (an ideal admittance: 0.4-1.8 %); its correlation with apparatus signatures:";
   nlohmann::json jr = nlohmann::json::object();
   for (const auto& [n, v] : sd.rho) {
-    o << " " << n << " " << f4(v) << ";";
+    o << " " << n << " " << g4(v) << ";";
     jr[n] = v;
   }
   o << "\n  (apparatus mechanisms between the logged force and the handle make the two routes disagree; person-side ones do not)\n";

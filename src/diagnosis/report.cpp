@@ -6,14 +6,16 @@
 
 namespace manip::diagnosis {
 namespace {
-
 std::string fmt(const char* f, double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, f, v);
   return buf;
 }
+}  // namespace
 
 std::string g4(double v) { return fmt("%.4g", v); }
+
+namespace {
 
 std::string interval(const Interval& i) { return g4(i.value) + " [" + g4(i.lo) + ", " + g4(i.hi) + "]"; }
 

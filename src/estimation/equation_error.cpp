@@ -12,7 +12,6 @@
 namespace manip::estimation {
 namespace {
 
-
 // A parameter of the identification model: element (i, j) of M (0), D (1)
 // or K (2); `sym` marks K12 = K21 shared (eq. 30).
 struct Param {

@@ -13,9 +13,11 @@
 #include "manip/sim/hidden_effects.hpp"
 #include "manip/sim/presets.hpp"
 #include "synthetic.hpp"
+#include "mat_text.hpp"
 
 using namespace manip;
 using namespace manip::sim;
+using sim_test::show;
 
 namespace {
 
@@ -54,12 +56,6 @@ Result run(const std::vector<HiddenEffect>& effects, std::uint64_t hidden_seed) 
   out.session_id = asmb.session().session_id;
   out.apparent = sum.apparent;
   return out;
-}
-
-std::string show(const Mat2& m) {
-  std::ostringstream o;
-  o << "[" << m(0, 0) << " " << m(0, 1) << "; " << m(1, 0) << " " << m(1, 1) << "]";
-  return o.str();
 }
 
 }  // namespace

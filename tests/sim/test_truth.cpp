@@ -11,9 +11,11 @@
 #include "manip/sim/session_runner.hpp"
 #include "manip/sim/truth.hpp"
 #include "synthetic.hpp"
+#include "mat_text.hpp"
 
 using namespace manip;
 using namespace manip::sim;
+using sim_test::show;
 
 namespace {
 
@@ -42,12 +44,6 @@ Mat2 mean_of(const std::vector<manip::impedance_truth_t>& v, bool stiffness) {
   Mat2 s = Mat2::Zero();
   for (const auto& t : v) s += mat(stiffness ? t.k_npm : t.d_nspm);
   return s / static_cast<double>(v.size());
-}
-
-std::string show_mat(const Mat2& m) {
-  std::ostringstream o;
-  o << "[" << m(0, 0) << " " << m(0, 1) << "; " << m(1, 0) << " " << m(1, 1) << "]";
-  return o.str();
 }
 
 }  // namespace
@@ -112,7 +108,7 @@ TEST_CASE("truth: linear person without reflex, apparent truth equals the intrin
   for (const auto& t : c.trials)
     if (t.perturbed) CHECK(t.truth_model == "linear-impedance");
   const Mat2 da = mat(c.apparent[0].d_nspm), ka = mat(c.apparent[0].k_npm);
-  INFO("apparent D " << show_mat(da) << " K " << show_mat(ka) << " residual " << sum.apparent->rms_residual_n << " of "
+  INFO("apparent D " << show(da) << " K " << show(ka) << " residual " << sum.apparent->rms_residual_n << " of "
                      << sum.apparent->rms_force_n << " N");
   // Tolerance 1 % per element (measured: see docs/simulation.md).
   for (int i = 0; i < 2; ++i)
@@ -146,8 +142,8 @@ TEST_CASE("truth: neuromechanical arm with the short-latency reflex: apparent K 
   REQUIRE(c.intrinsic.size() == 8);
   const Mat2 ka = mat(c.apparent[0].k_npm), ki = mean_of(c.intrinsic, true);
   const Mat2 da = mat(c.apparent[0].d_nspm), di = mean_of(c.intrinsic, false);
-  INFO("apparent K " << show_mat(ka) << " D " << show_mat(da) << " residual " << sum.apparent->rms_residual_n << " of "
-                     << sum.apparent->rms_force_n << " N\nintrinsic K " << show_mat(ki) << " D " << show_mat(di));
+  INFO("apparent K " << show(ka) << " D " << show(da) << " residual " << sum.apparent->rms_residual_n << " of "
+                     << sum.apparent->rms_force_n << " N\nintrinsic K " << show(ki) << " D " << show(di));
   // The reflex adds stiffness inside the window, along both axes.
   CHECK(ka(0, 0) > 1.1 * ki(0, 0));
   CHECK(ka(1, 1) > 1.1 * ki(1, 1));
@@ -161,7 +157,7 @@ TEST_CASE("truth: neuromechanical arm with the short-latency reflex: apparent K 
   for (const auto& sm : r.summaries)
     if (sm.method == "pem" && sm.group.is_session()) pem = &sm;
   REQUIRE(pem);
-  INFO("pem K " << show_mat(pem->k_npm) << " D " << show_mat(pem->d_nspm));
+  INFO("pem K " << show(pem->k_npm) << " D " << show(pem->d_nspm));
   // The estimator's clean-data accuracy (issue 11: pooled K within 10 %, D
   // within 20 %) on the diagonal, against the apparent truth.
   for (int i = 0; i < 2; ++i) {

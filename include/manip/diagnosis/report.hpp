@@ -18,6 +18,8 @@ struct ReportContext {
 };
 
 [[nodiscard]] std::string text_report(const Diagnosis& d, const ReportContext& ctx);
+// A number as diagnose_model's text prints it (printf "%.4g").
+[[nodiscard]] std::string g4(double v);
 // One fitted parameter as every section of the JSON report has it: name,
 // unit, value, ci95 [lo, hi], and its plausible range when it has one.
 [[nodiscard]] nlohmann::json param_json(const ParamEstimate& p);
