@@ -1,5 +1,6 @@
 #include "manip/canopen/error.hpp"
 
+#include <cstdarg>
 #include <cstdio>
 
 #include "manip/canopen/cia402.hpp"
@@ -121,62 +122,75 @@ const char* emcy_code_text(uint16_t c) {
   }
 }
 
-std::string describe(const Error& e) {
+namespace {
+// Appends to a fixed buffer, truncating; the format attribute lets the
+// compiler check every call's arguments against its literal format.
+struct Text {
   char buf[320];
-  const char* what = to_string(e.code);
   int n = 0;
-  if (e.node != 0) n = std::snprintf(buf, sizeof buf, "node %u: %s", e.node, what);
-  else n = std::snprintf(buf, sizeof buf, "bus: %s", what);
-  auto add = [&](auto... args) {
-    if (n >= 0 && n < static_cast<int>(sizeof buf)) n += std::snprintf(buf + n, sizeof buf - n, args...);
-  };
+  [[gnu::format(printf, 2, 3)]] void add(const char* fmt, ...) {
+    if (n < 0 || n >= static_cast<int>(sizeof buf)) return;
+    std::va_list ap;
+    va_start(ap, fmt);
+    const int k = std::vsnprintf(buf + n, sizeof buf - static_cast<std::size_t>(n), fmt, ap);
+    va_end(ap);
+    n = k < 0 ? k : n + k;
+  }
+};
+}  // namespace
+
+std::string describe(const Error& e) {
+  Text t;
+  const char* what = to_string(e.code);
+  if (e.node != 0) t.add("node %u: %s", e.node, what);
+  else t.add("bus: %s", what);
   switch (e.code) {
     case ErrorCode::SdoAbort:
-      add(" at 0x%04X:%02X, abort code 0x%08X (%s)", e.index, e.sub, e.value, sdo_abort_text(e.value));
+      t.add(" at 0x%04X:%02X, abort code 0x%08X (%s)", e.index, e.sub, e.value, sdo_abort_text(e.value));
       break;
     case ErrorCode::SdoTimeout:
     case ErrorCode::SdoProtocol:
     case ErrorCode::SdoNotAllowed:
-      add(" at 0x%04X:%02X", e.index, e.sub);
+      t.add(" at 0x%04X:%02X", e.index, e.sub);
       break;
     case ErrorCode::VerifyMismatch:
-      add(" at 0x%04X:%02X: read 0x%08X, expected 0x%08X", e.index, e.sub, e.value, e.detail);
+      t.add(" at 0x%04X:%02X: read 0x%08X, expected 0x%08X", e.index, e.sub, e.value, e.detail);
       break;
     case ErrorCode::UnexpectedNode:
-      add(" (COB-ID 0x%03X; configured node expected: %u)", e.value, e.detail);
+      t.add(" (COB-ID 0x%03X; configured node expected: %u)", e.value, e.detail);
       break;
     case ErrorCode::NmtStateWrong:
-      add(" (state 0x%02X %s)", e.value, to_string(static_cast<NmtState>(e.value)));
+      t.add(" (state 0x%02X %s)", e.value, to_string(static_cast<NmtState>(e.value)));
       break;
     case ErrorCode::TpdoMissing:
-      add(" (%u consecutive periods)", e.detail);
+      t.add(" (%u consecutive periods)", e.detail);
       break;
     case ErrorCode::EmcyFault:
     case ErrorCode::EmcyWarning:
-      add(" code 0x%04X (%s), error register 0x%02X", e.value, emcy_code_text(static_cast<uint16_t>(e.value)), e.detail);
+      t.add(" code 0x%04X (%s), error register 0x%02X", e.value, emcy_code_text(static_cast<uint16_t>(e.value)), e.detail);
       break;
     case ErrorCode::DriveFault:
     case ErrorCode::FaultResetFailed:
-      add(" (statusword 0x%04X)", e.value);
+      t.add(" (statusword 0x%04X)", e.value);
       break;
     case ErrorCode::UncommandedDisable:
-      add(" (statusword 0x%04X: %s, voltage enabled bit 4 %s); both drives disabled until the operator's FAULT_RESET",
+      t.add(" (statusword 0x%04X: %s, voltage enabled bit 4 %s); both drives disabled until the operator's FAULT_RESET",
           e.value, cia402::to_string(cia402::decode(static_cast<uint16_t>(e.value))),
           (e.value & cia402::sw::kVoltageEnabled) ? "on" : "off");
       break;
     case ErrorCode::EStopChain:
-      add("; both drives disabled until the operator's FAULT_RESET");
+      t.add("; both drives disabled until the operator's FAULT_RESET");
       break;
     case ErrorCode::BusLoadTooHigh:
-      add(" (%u.%u %% > limit %u.%u %%)", e.value / 10, e.value % 10, e.detail / 10, e.detail % 10);
+      t.add(" (%u.%u %% > limit %u.%u %%)", e.value / 10, e.value % 10, e.detail / 10, e.detail % 10);
       break;
     case ErrorCode::HeartbeatLost:
     case ErrorCode::BootTimeout:
-      add(" (after %u ms)", e.detail);
+      t.add(" (after %u ms)", e.detail);
       break;
     default: break;
   }
-  return std::string(buf);
+  return std::string(t.buf);
 }
 
 }  // namespace manip::canopen

@@ -71,7 +71,6 @@ TEST_CASE("baseline least squares recovers I, B, K, c of a noise-free record exa
   const double I = 0.02, B = 0.9, K = 150.0, c = 3.0;
   const int n = 20000;
   std::vector<double> x(n), xd(n), xdd(n);
-  double xm = 0;
   for (int i = 0; i < n; ++i) {
     const double t = i * r.dt_s;
     x[static_cast<std::size_t>(i)] = 0.02 * std::sin(2 * std::numbers::pi * 1.3 * t) + 0.01 * std::sin(2 * std::numbers::pi * 4.1 * t + 1.0);
@@ -79,7 +78,6 @@ TEST_CASE("baseline least squares recovers I, B, K, c of a noise-free record exa
                                       0.01 * 2 * std::numbers::pi * 4.1 * std::cos(2 * std::numbers::pi * 4.1 * t + 1.0);
     xdd[static_cast<std::size_t>(i)] = -0.02 * std::pow(2 * std::numbers::pi * 1.3, 2) * std::sin(2 * std::numbers::pi * 1.3 * t) -
                                        0.01 * std::pow(2 * std::numbers::pi * 4.1, 2) * std::sin(2 * std::numbers::pi * 4.1 * t + 1.0);
-    xm += x[static_cast<std::size_t>(i)];
   }
   r.pos_rad = x;
   r.torque_nm.resize(n);

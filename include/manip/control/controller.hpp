@@ -103,7 +103,6 @@ class Controller {
   std::int64_t utime_{0};
   ProtocolEvents events_{};
   std::uint32_t present_{0};
-  bool safe_change_{false};
   FaultRecord pending_fault_{};
   bool have_pending_fault_{false};
   Vec2 held_force_{Vec2::Zero()};

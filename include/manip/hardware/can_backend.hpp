@@ -172,7 +172,6 @@ class CanBackend final : public Backend, public BackendLogTap {
   std::vector<std::unique_ptr<canopen::SocketCanPort>> ports_;
   std::unique_ptr<canopen::CanDriveSet> set_;
   std::int64_t now_us_{0};
-  std::int64_t t0_us_{0};
   std::int64_t cycles_{0};
   std::int64_t last_write_us_{0};
   Vec2 last_force_n_{Vec2::Zero()};
