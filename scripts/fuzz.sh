@@ -20,8 +20,8 @@ launcher=()
 if command -v ccache >/dev/null; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
 # A unity build (CMake's CMAKE_UNITY_BUILD, as the sanitizer build of
 # scripts/test.sh): the harnesses' union of sources in batches of 8, compile
-# CPU 597 -> 391 s, wall 302 -> 196 s on the 2-core machine (2026-12-04,
-# docs/benchmarks.md); MANIP_UNITY_BUILD=OFF compiles one file at a time.
+# CPU 597 -> 391 s, wall 302 -> 196 s on the 2-core machine (2026-12-04);
+# MANIP_UNITY_BUILD=OFF compiles one file at a time.
 mkdir -p "$build"
 cmake -S "$root/fuzz" -B "$build" -G Ninja -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
   -DCMAKE_UNITY_BUILD="${MANIP_UNITY_BUILD:-ON}" "${launcher[@]}" >"$build/cmake.log" 2>&1 || { cat "$build/cmake.log"; exit 1; }
