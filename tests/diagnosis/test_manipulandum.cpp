@@ -564,10 +564,10 @@ TEST_CASE("manipulandum: hidden early feedback 0.5 at 60-100 ms, noise-free, is 
   // so this is the suite's longest case: 3 held-out folds, and two
   // repetitions per angle (16 perturbed trials) instead of three. Noise-free,
   // the repetitions of an angle carry the same response: 16 and 24 trials
-  // give the same delay (90.0 ms), gain (0.430) and D, K errors (0.53 %,
-  // 0.62 %) in 181 s and 260 s alone on the 2-core machine (2026-12-04).
-  // One repetition (8 trials) is below the 10-fold equation-error search's
-  // minimum of 10. The diagnosis tests' timeout is 1200 s (tests/CMakeLists.txt).
+  // give the figures above to three digits, in 181 s and 260 s alone on the
+  // 2-core machine (2026-12-04). One repetition (8 trials) is below the
+  // 10-fold equation-error search's minimum of 10. The diagnosis tests'
+  // timeout is 1200 s (tests/CMakeLists.txt).
   c.heldout_folds = 3;
   c.reps = 2;
   const auto o = run_case(c);
