@@ -6,17 +6,20 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 jobs=$(nproc)
 scripts/setup.sh
-# The sanitizer build is a unity build (CMake's CMAKE_UNITY_BUILD: up to 8
+# Both GCC builds are unity builds (CMake's CMAKE_UNITY_BUILD: up to 8
 # sources of a target per compile, headers parsed and Eigen's templates
-# instantiated once per batch): about a quarter less compile CPU
-# (docs/benchmarks.md, "Build time", 2026-12-03). The Release build stays
-# one file per compile, as a developer builds (CMakeLists.txt leaves unity
-# off, so an edit recompiles one file): it is what catches a source that
-# compiles only beside another one's includes.
+# instantiated once per batch), as README command 1 builds: the Release
+# build 26 % and the sanitizer build 23 % less compile CPU than one file per
+# compile (docs/benchmarks.md, "Build time" and "Unity Release build").
+# CMakeLists.txt leaves unity off, so a developer's edit recompiles one
+# file; scripts/compile_alone.py (clang, front end only) is CI's check that
+# each source still compiles without another one's includes.
 unity=-DCMAKE_UNITY_BUILD=${MANIP_UNITY_BUILD:-ON}
 echo "== build (Release, -Werror) ==" >&2
-cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DMANIP_WERROR=ON >/dev/null
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DMANIP_WERROR=ON "$unity" >/dev/null
 ninja -C build
+echo "== each source compiled alone (clang, -Werror, front end only) ==" >&2
+python3 scripts/compile_alone.py --jobs "$jobs"
 echo "== tests ==" >&2
 (cd build && ctest --output-on-failure -j "$jobs")
 # Fuzzing with libFuzzer (clang, ASan + UBSan): every harness of fuzz/ for a

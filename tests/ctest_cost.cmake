@@ -4,7 +4,8 @@
 # each case's COST so that `ctest -j` starts the long ones first.
 # Measured: 2026-12-04, 2-core machine: Release pass 384/384 (852 s), ASan + UBSan pass 358/358 (712 s)
 # manip_test_cost(<name> <release_s> <sanitize_s>)
-manip_test_cost([=[diagnosis:manipulandum: hidden early feedback 0.5 at 60-100 ms, noise-free, is named - the intrinsic D, K recovered]=] 333.7 0.0)
+manip_test_cost([=[diagnosis:manipulandum: hidden early feedback 0.5 at 60-100 ms, noise-free, is named - the intrinsic D, K recovered]=] 181.0 0.0)
+manip_test_cost([=[diagnosis:manipulandum: sanitizer-sized session: a named delay through its held-out folds and a second round]=] 6.5 65.0)
 manip_test_cost([=[diagnosis:manipulandum: a clean session -> no significant misfit]=] 17.9 190.6)
 manip_test_cost([=[diagnosis:manipulandum: hidden delay 2 ms + friction 1 N are both named, each within 20 %, D and K after the joint refit]=] 124.0 0.0)
 manip_test_cost([=[estimation:estimate_impedance bad-input matrix]=] 37.8 108.2)

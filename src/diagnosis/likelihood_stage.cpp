@@ -6,6 +6,7 @@
 #include <exception>
 #include <mutex>
 #include <optional>
+#include <stdexcept>
 #include <thread>
 #include <cmath>
 #include <cstdio>
@@ -797,8 +798,14 @@ PlanarRun run_planar(std::vector<CollectedSession>& sessions, const PlanarOption
   PlanarRun r;
   if (eo.progress)
     eo.progress("isolating the variational signals (eq. 21)" + std::string(po.pem_baseline ? " and fitting the default method" : ""));
-  r.prep = prepare_planar(sessions, po, eo.folds);
   r.lib = planar_library(po.nuisance_order, with_time_varying, po.directional_reflex);
+  if (!po.mechanisms.empty()) {
+    for (const auto& id : po.mechanisms)
+      if (std::none_of(r.lib.begin(), r.lib.end(), [&](const auto& m) { return m->id() == id; }))
+        throw std::invalid_argument("mechanism '" + id + "' is not in the manipulandum library");
+    std::erase_if(r.lib, [&](const auto& m) { return std::find(po.mechanisms.begin(), po.mechanisms.end(), m->id()) == po.mechanisms.end(); });
+  }
+  r.prep = prepare_planar(sessions, po, eo.folds);
   eo.require_plausible = true;
   eo.rank_by_t = true;
   eo.prefer_simpler = true;

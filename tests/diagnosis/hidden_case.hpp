@@ -51,6 +51,7 @@ struct Case {
   double pulse_s = 0.0;    // perturbation pulse duration (0: the schema's 150 ms, paper §3.2)
   double pulse_n = 0.0;    // its amplitude (0: the schema's 15 N)
   bool directional = false;  // the library with the direction-dependent reflex (PlanarOptions::directional_reflex)
+  std::vector<std::string> mechanisms{};  // the library's mechanisms (PlanarOptions::mechanisms; empty: all)
 };
 
 inline Outcome run_case(const Case& c) {
@@ -80,6 +81,7 @@ inline Outcome run_case(const Case& c) {
   PlanarOptions po;
   if (const char* ord = std::getenv("MANIP_MSTUDY_ORDER")) po.nuisance_order = std::atoi(ord);
   po.directional_reflex = c.directional;
+  po.mechanisms = c.mechanisms;
   EngineOptions eo;
   eo.bootstrap = c.bootstrap;
   auto run = run_planar(ses, po, eo, false, c.heldout_folds);

@@ -13,6 +13,8 @@
 #include <numbers>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
+#include <string>
 
 #include "manip/common/errors.hpp"
 #include "hidden_case.hpp"
@@ -308,6 +310,45 @@ TEST_CASE("manipulandum: likelihood check on a short session names a 2 ms delay"
   CHECK(f->heldout_done);
   CHECK(f->fold_gain_nats.size() == 3);
   CHECK(f->lr > 20.0);
+}
+
+// The sanitizer pass's named candidate: the path the clean session never
+// takes (a candidate accepted, its held-out folds, a second round, the
+// corrected D, K and their conclusion) on a session small enough for ASan +
+// UBSan: 30 movements, a 4 ms delay and a two-mechanism library (the
+// delay and the friction that competes with it, docs/diagnosis.md).
+TEST_CASE("manipulandum: sanitizer-sized session: a named delay through its held-out folds and a second round") {
+  Case c;
+  c.effects = {sim::parse_hidden_effect("delay:0.004")};
+  c.movements = 30;
+  c.bootstrap = 5;
+  c.heldout_folds = 3;
+  c.mechanisms = {"actuation_delay", "stage_friction"};
+  const auto o = run_case(c);
+  INFO("perturbed trials " << o.perturbed << "; named: " << (o.concl.named.empty() ? "none" : o.concl.named.front()));
+  REQUIRE(o.lk.available);
+  REQUIRE(o.concl.named.size() == 1);
+  CHECK(o.concl.named.front() == "actuation_delay");
+  CHECK(o.lk.rounds.size() == 2);  // the friction profiled after the delay, not accepted
+  const auto* f = o.named_fit("actuation_delay");
+  REQUIRE(f);
+  CHECK(f->fold_gain_nats.size() == 3);
+  check_main_param(c.effects.front(), o);  // the delay within 20 %, a positive held-out gain
+  REQUIRE(o.concl.has_corrected);
+  CHECK(o.concl.corrected.k.allFinite());
+  CHECK(o.concl.corrected.d.allFinite());
+}
+
+TEST_CASE("manipulandum: a library restricted to an unknown mechanism is refused by name") {
+  std::vector<CollectedSession> ses(1);
+  PlanarOptions po;
+  po.mechanisms = {"actuation_delay", "no_such_mechanism"};
+  try {
+    (void)run_planar(ses, po, EngineOptions{});
+    FAIL("accepted");
+  } catch (const std::invalid_argument& e) {
+    CHECK(std::string(e.what()).find("'no_such_mechanism'") != std::string::npos);
+  }
 }
 
 TEST_CASE("manipulandum: a clean session -> no significant misfit") {

@@ -96,6 +96,12 @@ struct PlanarOptions {
   // along the reach, which named it in 2 of 20 clean sessions;
   // docs/diagnosis.md, "Direction-dependent reflex").
   bool directional_reflex = false;
+  // The library's mechanisms by id (empty: all of them). Fewer candidates
+  // cost fewer likelihood fits: the sanitizer pass takes a named candidate
+  // through the held-out check and a second round on a two-mechanism
+  // library (tests/diagnosis/test_manipulandum.cpp). run_planar throws
+  // std::invalid_argument naming an id the library does not have.
+  std::vector<std::string> mechanisms;
 };
 
 // The estimator's default method fitted on the same trials (for the report).
