@@ -3,6 +3,7 @@
 // Thin main: options, the single-joint front end, the engine, the reports.
 // Command line: common/cli.hpp (docs/cli.md): --version, -q, --force, the
 // exit-code table in --help.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -33,7 +34,8 @@ const std::vector<int> kExitCodes = {ec::kOk, ec::kUsage, ec::kInput, ec::kOutpu
 const char* kExitNotes =
     "What the codes mean for diagnose_model (several: the most severe wins, docs/exit-codes.md):\n"
     "    0: diagnosis done, with or without a misfit found\n"
-    "    2: bad command line (also: no input, or logs and --single-joint together)\n"
+    "    2: bad command line (also: no input, logs and --single-joint together, an id of --mechanisms not in\n"
+    "       the library)\n"
     "    4: an input is unusable: missing or unreadable, a malformed line (FILE:LINE: reason), too short for\n"
     "       the cross-validation or too few perturbed trials, logs with different configurations\n"
     "    6: the --json file exists or the --plots DIR is not empty (no --force; checked before any input is\n"
@@ -91,6 +93,11 @@ int run(int argc, char** argv) {
   app.add_flag("--directional-reflex", directional,
                "manipulandum: add the direction-dependent reflex (one muscle group, acting only when stretched) to the library (off by "
                "default: it also fits a residual common to all trials along the reach)");
+  std::vector<std::string> mechanisms;
+  app.add_option("--mechanisms", mechanisms,
+                 "manipulandum: test only these mechanisms of the library (comma-separated ids, e.g. "
+                 "actuation_delay,stage_friction; docs/diagnosis.md): a confirmatory test, the family-wise level is over them")
+      ->delimiter(',');
   app.add_option("--poly-order", poly_order, "manipulandum: per-trial nuisance polynomial projected out (-1 none; default 1)")->check(CLI::Range(-1, 8));
   double t_est = 0.15;
   app.add_flag("--no-default-method", no_pem, "manipulandum: do not fit the estimator's default method (pem) for comparison");
@@ -117,6 +124,26 @@ int run(int argc, char** argv) {
     std::cerr << "diagnose_model: give either session logs or --single-joint FILE.csv, not both\n";
     return ec::kUsage;
   }
+  if (!mechanisms.empty()) {
+    if (logs.empty()) {
+      std::cerr << "diagnose_model: --mechanisms applies to session logs, not to --single-joint\n";
+      return ec::kUsage;
+    }
+    // Checked before any input is read, against the library the other flags make.
+    std::vector<std::string> known;
+    std::string list;
+    for (const auto& m : diagnosis::planar_library(poly_order, time_varying, directional)) {
+      known.push_back(m->id());
+      list += (list.empty() ? "" : ", ") + m->id();
+    }
+    for (const auto& id : mechanisms)
+      if (std::find(known.begin(), known.end(), id) == known.end()) {
+        const char* needs = id == "directional_reflex" ? "; it needs --directional-reflex"
+                            : id == "time_varying_stiffness" ? "; it needs --time-varying" : "";
+        std::cerr << "diagnose_model: --mechanisms: '" << id << "' is not in the manipulandum library (" << list << ")" << needs << "\n";
+        return ec::kUsage;
+      }
+  }
   if (!c.quiet) eo.progress = [](const std::string& s) { std::cerr << "diagnose_model: " << s << "\n"; };
   // Refused before any input is read (exists without --force, directory not
   // writable); written to a temporary beside it and renamed when complete, so
@@ -142,6 +169,7 @@ int run(int argc, char** argv) {
     po.pem_baseline = !no_pem;
     po.nuisance_order = poly_order;
     po.directional_reflex = directional;
+    po.mechanisms = mechanisms;
     const auto run = diagnosis::run_planar(sessions, po, eo, time_varying);
     const auto& prep = run.prep;
     const auto& res = run.dg;
@@ -153,6 +181,11 @@ int run(int argc, char** argv) {
                   "two equations (x1, x2) per sample; truth channels not read",
                   prep.data.planar.size(), prep.t_est_s, prep.sg_window, po.estimator.pipeline.hp_cutoff_hz);
     ctx.preprocessing = buf;
+    if (!mechanisms.empty()) {
+      ctx.preprocessing += "; library restricted to ";
+      for (std::size_t k = 0; k < mechanisms.size(); ++k) ctx.preprocessing += (k ? ", " : "") + mechanisms[k];
+      ctx.preprocessing += " (--mechanisms)";
+    }
     ctx.baseline_equation = "Δu_ext - M_BSP Δẍ = D Δẋ + K Δx (eq. 14 with eq. 21's Δu_ext; D full, K symmetric, M_BSP eq. 16 fixed)";
     ctx.cv_units = "trials (both axes of a trial in the same fold; bootstrap resamples trials)";
     ctx.target_word = "target";

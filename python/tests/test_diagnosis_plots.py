@@ -485,8 +485,15 @@ class App(unittest.TestCase):
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=120)
         self.assertEqual(r.returncode, 0, r.stderr)
         out, js = os.path.join(d, "plots"), os.path.join(d, "h.json")
-        self.run_app([log, "--folds", "5", "--bootstrap", "50", "--json", js, "--plots", out])
+        # Three mechanisms (diagnose_model --mechanisms): the handle, the inertia that shares its
+        # signature and the delay; a third of the library's likelihood fits.
+        mech = "handle_mass,wrong_segment_inertia,actuation_delay"
+        self.run_app([log, "--folds", "5", "--bootstrap", "50", "--mechanisms", mech, "--json", js, "--plots", out])
         rep = self.check_dir(out, STEMS_MANIP, js)
+        self.assertIn("library restricted to handle_mass, wrong_segment_inertia, actuation_delay (--mechanisms)",
+                      rep["preprocessing"])
+        self.assertEqual({c["id"] for c in rep["rounds"][0]["candidates"]}, set(mech.split(",")))
+        self.assertEqual(rep["conclusion"]["named"][:1], ["handle_mass"])
         tr = rep["traces"]
         self.assertEqual(tr["kind"], "manipulandum")
         self.assertEqual(tr["n_trials"], rep["manipulandum"]["used"])

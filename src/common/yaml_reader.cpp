@@ -218,7 +218,12 @@ Mat2 Section::mat2_spd(const std::string& key) {
 
 void Section::finish() const {
   for (auto it = node_.begin(); it != node_.end(); ++it) {
-    const std::string k = it->first.as<std::string>();
+    // YAML allows any node as a key ("? [a, b]: 1", "? : 1"); no manip key
+    // is one, and as<std::string>() would throw yaml-cpp's own exception
+    // past the ConfigError contract (found by fuzz_estimator_config).
+    if (!it->first.IsScalar())
+      fail_node(it->first, full(scalar_text(it->first)), "a key must be a plain name, not a sequence, mapping or null");
+    const std::string k = it->first.Scalar();
     if (!known_.count(k)) {
       std::string list;
       for (const auto& a : known_) list += (list.empty() ? "" : ", ") + a;

@@ -53,6 +53,18 @@ TEST_CASE("yaml reader: duplicate keys and syntax errors name the line") {
   CHECK(error_of([] { yaml::load_file("/nonexistent/x.yaml"); }) == "/nonexistent/x.yaml: cannot read the file");
 }
 
+TEST_CASE("yaml reader: a key that is not a plain name is refused with file, line and key") {
+  // Complex keys ("? node") are valid YAML: a sequence, a mapping, or nothing (null).
+  for (const std::string text : {"a: 1\n? [x, y]\n: 2\n", "a: 1\n? {x: 1}\n: 2\n", "a: 1\n?\n: 2\n"}) {
+    INFO(text);
+    yaml::Section top("k.yaml", yaml::parse(text, "k.yaml"), "");
+    CHECK(top.number("a", [](double) { return true; }, "") == 1.0);
+    const std::string e = error_of([&] { top.finish(); });
+    CHECK(e.rfind("k.yaml:", 0) == 0);
+    CHECK(e.find(": a key must be a plain name, not a sequence, mapping or null") != std::string::npos);
+  }
+}
+
 TEST_CASE("yaml reader: non-finite numbers are refused") {
   yaml::Section s("n.yaml", yaml::parse("x: .nan\ny: .inf\n", "n.yaml"), "");
   CHECK(error_of([&] { s.any_number("x"); }) == "n.yaml:1: x: expected a finite number, got '.nan'");

@@ -786,7 +786,8 @@ TEST_CASE("manipulandum: model-based corrections drive the baseline model along 
 // repetitions per angle, 3), MANIP_MSTUDY_PULSE_S / MANIP_MSTUDY_PULSE_N (the
 // perturbation pulse's duration and amplitude; default the paper's 0.15 s,
 // 15 N), MANIP_MSTUDY_NOISE (none ... realistic, the default), MANIP_MSTUDY_DIRECTIONAL=1 (the
-// library with the direction-dependent reflex),
+// library with the direction-dependent reflex), MANIP_MSTUDY_MECHANISMS (comma
+// list of ids: the library restricted to them, diagnose_model --mechanisms),
 // MANIP_MSTUDY_VERBOSE=1 (per session on stderr).
 TEST_CASE("manipulandum: detection study", "[.mstudy]") {
   const char* se = std::getenv("MANIP_MSTUDY_SEEDS");
@@ -829,6 +830,10 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
       if (const char* nz = std::getenv("MANIP_MSTUDY_NOISE")) c.noise = sim::parse_noise_level(nz);
       // The direction-dependent reflex is in the library on request only.
       c.directional = std::getenv("MANIP_MSTUDY_DIRECTIONAL") != nullptr;
+      if (const char* ms = std::getenv("MANIP_MSTUDY_MECHANISMS")) {
+        std::stringstream ss(ms);
+        for (std::string t; std::getline(ss, t, ',');) c.mechanisms.push_back(t);
+      }
       // The held-out check decides only for second and later names: pairs
       // get diagnose_model's 10 folds; single mechanisms 5 (half the pem
       // fits; there only the "held-out gain > 0" column depends on it).

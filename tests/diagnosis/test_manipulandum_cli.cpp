@@ -57,6 +57,28 @@ TEST_CASE("make_hidden_session --no-truth leaves the truth channels out - diagno
   CHECK(code(testutil::run_command(kDiag + " -q " + without + " --single-joint x.csv", &out)) == exit_code::kUsage);
 }
 
+TEST_CASE("diagnose_model --mechanisms: an id not in the library is a usage error before any input is read") {
+  const auto dir = testutil::temp_dir("manip_cli");
+  const std::string missing = dir + "/never-written.lcm", log = dir + "/short.lcm";
+  std::string out;
+  int rc = code(testutil::run_command(kDiag + " -q " + missing + " --mechanisms actuation_delay,no_such", &out));
+  INFO(out);
+  CHECK(rc == exit_code::kUsage);  // not 4: the missing log was never opened
+  CHECK(out.find("--mechanisms: 'no_such' is not in the manipulandum library (") != std::string::npos);
+  CHECK(out.find("actuation_delay") != std::string::npos);  // the library's ids are listed
+  CHECK(out.find('\n') == out.size() - 1);
+  rc = code(testutil::run_command(kDiag + " -q " + missing + " --mechanisms directional_reflex", &out));
+  CHECK(rc == exit_code::kUsage);
+  CHECK(out.find("it needs --directional-reflex") != std::string::npos);
+  CHECK(code(testutil::run_command(kDiag + " -q --single-joint x.csv --mechanisms actuation_delay", &out)) == exit_code::kUsage);
+  // Known ids pass the check and the log is read: 12 movements are too few trials (4), not a usage error.
+  REQUIRE(code(testutil::run_command(kHidden + " -q --out " + log + " --movements 12 --reps 1 --force", &out)) == 0);
+  rc = code(testutil::run_command(kDiag + " -q " + log + " --directional-reflex --mechanisms directional_reflex,stage_friction", &out));
+  INFO(out);
+  CHECK(rc == exit_code::kInput);
+  CHECK(out.find("needs at least 10") != std::string::npos);
+}
+
 TEST_CASE("make_hidden_session and manip_sim --pulse-duration, --pulse-amplitude: the session header carries the pulse - out of range is a usage error") {
   const auto dir = testutil::temp_dir("manip_cli_pulse");
   const std::string sim = std::string(MANIP_BINARY_DIR) + "/apps/manip_sim";
