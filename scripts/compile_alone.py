@@ -7,9 +7,10 @@ header that only an earlier source of its batch included. This check
 compiles each source on its own, as a one-file build would, with clang's
 front end only (-fsyntax-only: parsing, templates instantiated, every
 warning of the build, -Werror; no optimisation, no object): about 2 min of
-wall time on the 2-core machine against ~4 min that the unity build saves
-(docs/benchmarks.md, "Unity Release build"). It is also the tree's only
-clang build of every source (the fuzz build compiles the harnesses' share).
+wall time on the 2-core machine, about 40 s more than the 94 s the unity
+build saves (docs/benchmarks.md, "Unity Release build"), kept because it is
+also the tree's only clang compile of every source (the fuzz build compiles
+the harnesses' share).
 
     scripts/compile_alone.py [--build DIR] [--jobs N] [SOURCE_PREFIX ...]
 

@@ -9,11 +9,12 @@ scripts/setup.sh
 # Both GCC builds are unity builds (CMake's CMAKE_UNITY_BUILD: up to 8
 # sources of a target per compile, headers parsed and Eigen's templates
 # instantiated once per batch), as README command 1 builds: the Release
-# build 26 % and the sanitizer build 23 % less compile CPU than one file per
+# build 29 % and the sanitizer build 23 % less compile CPU than one file per
 # compile (docs/benchmarks.md, "Build time" and "Unity Release build").
 # CMakeLists.txt leaves unity off, so a developer's edit recompiles one
-# file; scripts/compile_alone.py (clang, front end only) is CI's check that
-# each source still compiles without another one's includes.
+# file; scripts/compile_alone.py (clang, front end only, ~2 min) is CI's
+# check that each source still compiles without another one's includes,
+# and its only clang compile of every source.
 unity=-DCMAKE_UNITY_BUILD=${MANIP_UNITY_BUILD:-ON}
 echo "== build (Release, -Werror) ==" >&2
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DMANIP_WERROR=ON "$unity" >/dev/null

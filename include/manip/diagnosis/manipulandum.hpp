@@ -96,11 +96,11 @@ struct PlanarOptions {
   // along the reach, which named it in 2 of 20 clean sessions;
   // docs/diagnosis.md, "Direction-dependent reflex").
   bool directional_reflex = false;
-  // The library's mechanisms by id (empty: all of them). Fewer candidates
-  // cost fewer likelihood fits: the sanitizer pass takes a named candidate
-  // through the held-out check and a second round on a two-mechanism
-  // library (tests/diagnosis/test_manipulandum.cpp). run_planar throws
-  // std::invalid_argument naming an id the library does not have.
+  // The library's mechanisms by id (empty: all of them): a confirmatory
+  // test of chosen causes (diagnose_model --mechanisms), each greedy round's
+  // Holm correction over them only; fewer candidates also cost fewer
+  // likelihood fits. run_planar throws std::invalid_argument naming an id
+  // the library does not have.
   std::vector<std::string> mechanisms;
 };
 
