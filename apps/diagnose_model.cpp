@@ -220,9 +220,20 @@ int run(int argc, char** argv) {
                 rec.pos_rad.size(), rec.dt_s, sj.polyorder, prep.window, prep.cutoff_hz, prep.torque_sign,
                 prep.sign_flipped_automatically ? " (flipped: the record stores the reaction torque, baseline K was negative)" : "");
   ctx.preprocessing = buf;
+  const auto checks = diagnosis::single_joint_physical_checks(res);
+  if (!checks.empty()) {
+    ctx.extra_text = "\nPhysical checks of the baseline:\n";
+    for (const auto& pc : checks) ctx.extra_text += "  " + pc.text + "\n";
+  }
   std::cout << diagnosis::text_report(res, ctx);
   if (want_json) {
     auto j = diagnosis::json_report(res, ctx);
+    j["physical_checks"] = nlohmann::json::array();
+    for (const auto& pc : checks) {
+      nlohmann::json e = {{"what", pc.what}, {"text", pc.text}};
+      if (pc.least_lag_s > 0) e["least_torque_lag_s"] = pc.least_lag_s;
+      j["physical_checks"].push_back(e);
+    }
     j["traces"] = diagnosis::traces_json(prep.data, res);
     if (json_file) write_json(j);
     if (!plots_dir.empty()) draw_plots(j, plots_dir, c.force);

@@ -680,6 +680,21 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       if (opt.require_plausible)
         for (const auto& pp : c.params)
           if (!pp.plausible() || pp.at_edge()) c.implausible = true;
+      if (opt.require_physical && !c.params.empty()) {
+        const auto& mech = *lib[cand_lib[j]];
+        const auto n_shape = mech.shape_params().size();
+        const auto main = static_cast<std::size_t>(mech.main_param());
+        if (main < n_shape && main < c.params.size() && c.params[main].at_edge()) c.implausible = true;
+        // The sign only: a gain's size bound is a guess for some mechanisms
+        // (K2), its sign is physics (a reflex resists stretch, friction
+        // opposes motion).
+        bool some_gain = false;
+        for (std::size_t g = n_shape; g < c.params.size(); ++g) {
+          const auto& q = c.params[g];
+          some_gain = some_gain || !q.has_bounds || ((q.plausible_lo < 0.0 || q.est.value >= 0.0) && (q.plausible_hi > 0.0 || q.est.value <= 0.0));
+        }
+        if (!some_gain && c.params.size() > n_shape) c.implausible = true;
+      }
       const double score = opt.rank_by_t ? c.test.t : c.test.mean;
       if (c.significant && !c.implausible && (winner < 0 || score > best_gain)) {
         winner = static_cast<int>(where[j]);

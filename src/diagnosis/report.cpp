@@ -110,8 +110,19 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
     }
   }
   o << "\n";
-  if (!d.misfit_found()) {
+  // Candidates of the last round that improved the held-out prediction
+  // significantly with unphysical parameters (EngineOptions::require_physical,
+  // require_plausible): a misfit, but none the library can name.
+  std::string unphysical;
+  if (!d.rounds.empty())
+    for (const auto& c : d.rounds.back().candidates)
+      if (c.significant && c.implausible) unphysical += (unphysical.empty() ? "" : ", ") + c.id;
+  if (!d.misfit_found() && unphysical.empty()) {
     o << "Result: no significant misfit: no mechanism of the library improves the held-out prediction significantly.\n";
+  } else if (!d.misfit_found()) {
+    o << "Result: nothing named: " << unphysical
+      << " improve(s) the held-out prediction significantly, but only with parameters the library calls unphysical "
+         "(IMPLAUSIBLE above): a misfit outside the library's mechanisms.\n";
   } else {
     o << "Result: named cause(s), in the order added:\n";
     for (std::size_t a = 0; a < d.accepted.size(); ++a) {
@@ -121,6 +132,8 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
           o << "  " << a + 1 << ". " << c.title << "\n     signature: " << c.signature << "\n";
         }
     }
+    if (!unphysical.empty())
+      o << "  then not named: " << unphysical << " (a significant held-out gain, but only with unphysical parameters: IMPLAUSIBLE above)\n";
     o << "  held-out VAF " << interval(d.baseline_heldout.vaf) << " -> " << interval(d.final_heldout.vaf) << "\n";
     o << "  held-out NRMSE " << interval(d.baseline_heldout.nrmse) << " -> " << interval(d.final_heldout.nrmse) << "\n";
     o << "  held-out gain (1 - SSE_after/SSE_before) " << interval(d.heldout_gain) << "\n";
@@ -193,6 +206,10 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
     j["rounds"].push_back(jr);
   }
   j["misfit"] = d.misfit_found();
+  j["significant_unphysical"] = nlohmann::json::array();
+  if (!d.rounds.empty())
+    for (const auto& c : d.rounds.back().candidates)
+      if (c.significant && c.implausible) j["significant_unphysical"].push_back(c.id);
   j["accepted"] = d.accepted;
   j["final"]["heldout_vaf"] = jint(d.final_heldout.vaf);
   j["final"]["heldout_nrmse"] = jint(d.final_heldout.nrmse);

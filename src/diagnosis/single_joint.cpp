@@ -11,6 +11,8 @@
 #include <string_view>
 
 #include "manip/common/errors.hpp"
+#include "manip/diagnosis/engine.hpp"
+#include "manip/diagnosis/report.hpp"
 #include "manip/dsp/savgol.hpp"
 
 namespace manip::diagnosis {
@@ -207,6 +209,32 @@ SingleJointPrepared prepare_single_joint(const SingleJointRecord& rec, const Sin
   s.base.push_back(pc);
   s.base.emplace_back(n, 1.0);
   d.segments.push_back(std::move(s));
+  return out;
+}
+
+std::vector<PhysicalCheck> single_joint_physical_checks(const Diagnosis& d) {
+  std::vector<PhysicalCheck> out;
+  const auto* b = d.find_baseline("B");
+  const auto* k = d.find_baseline("K");
+  const auto* i = d.find_baseline("I");
+  // Only when the whole interval is below zero: a B near 0 is within its noise.
+  if (b && k && b->est.hi < 0.0 && k->est.value > 0.0) {
+    PhysicalCheck c;
+    c.what = "B < 0";
+    c.least_lag_s = -b->est.value / k->est.value;
+    c.text = "baseline B " + g4(b->est.value) + " N m s/rad < 0, which a passive joint cannot have: a lag T of the torque channel "
+             "behind the position channel reads as B - T K (and I - T B + T^2 K), here T >= -B/K = " + g4(c.least_lag_s * 1e3) +
+             " ms (no mechanism can separate it from B and I: check the channels' timing with a rigid load), or the channels' sign "
+             "conventions differ";
+    out.push_back(c);
+  }
+  if (i && i->est.hi < 0.0) {
+    PhysicalCheck c;
+    c.what = "I < 0";
+    c.text = "baseline I " + g4(i->est.value) + " kg m^2 < 0, which a foot and pedal cannot have: the acceleration carries a lag "
+             "between the channels or a filter on one of them (I - T B + T^2 K for a torque lag T)";
+    out.push_back(c);
+  }
   return out;
 }
 

@@ -21,6 +21,7 @@ const char* name(Hidden h) {
     case Hidden::quadratic_stiffness: return "quadratic_stiffness";
     case Hidden::offset_drift: return "offset_drift";
     case Hidden::friction: return "coulomb_friction";
+    case Hidden::torque_lag: return "torque_lag";
   }
   return "?";
 }
@@ -31,6 +32,7 @@ const char* main_param_name(Hidden h) {
     case Hidden::quadratic_stiffness: return "K2";
     case Hidden::offset_drift: return "drift_rate";
     case Hidden::friction: return "Fc";
+    case Hidden::torque_lag: return "lag";
     case Hidden::none: break;
   }
   return "";
@@ -42,10 +44,20 @@ double Truth::main_param(Hidden h) const {
     case Hidden::quadratic_stiffness: return K2;
     case Hidden::offset_drift: return drift_rate;
     case Hidden::friction: return Fc;
+    case Hidden::torque_lag: return lag_s;
     case Hidden::none: break;
   }
   return 0.0;
 }
+
+namespace {
+// One step of y' = (u - y) / lag with u linear between samples (first-order
+// hold; exact): the particular solution u_k + s (t - lag), s the input's slope.
+double first_order_lag_step(double y, double u0, double u1, double lag, double dt) {
+  const double a = std::exp(-dt / lag);
+  return a * y + (1.0 - a) * u0 + (u1 - u0) * (1.0 - lag / dt * (1.0 - a));
+}
+}  // namespace
 
 Generated generate(const Options& opt) {
   PortableRng rng(opt.seed * 0x9E3779B97F4A7C15ull + static_cast<std::uint64_t>(opt.hidden) + 17);
@@ -142,10 +154,32 @@ Generated generate(const Options& opt) {
       case Hidden::quadratic_stiffness: hid[i] = (pos[i] - xm) * (pos[i] - xm); break;
       case Hidden::offset_drift: hid[i] = time[i] - T / 2; break;
       case Hidden::friction: hid[i] = std::tanh(vel[i] / t.v_s); break;
+      case Hidden::torque_lag:
       case Hidden::none: break;
     }
   }
-  if (opt.hidden != Hidden::none) {
+  if (opt.hidden == Hidden::torque_lag) {
+    // The lag's hidden term is LP_T[intrinsic] - intrinsic, nonlinear in T:
+    // T is found by bisection (the term's RMS grows monotonically with T)
+    // so that its RMS is the magnitude's share of the intrinsic RMS.
+    const double target = opt.magnitude * irms * rng.uniform(0.8, 1.25);
+    auto term_rms = [&](double lag) {
+      double y = intr[0], acc2 = 0.0;
+      for (std::size_t i = 1; i < n; ++i) {
+        y = first_order_lag_step(y, intr[i - 1], intr[i], lag, dt);
+        acc2 += (y - intr[i]) * (y - intr[i]);
+      }
+      return std::sqrt(acc2 / static_cast<double>(n));
+    };
+    double lo = 0.0, hi = 0.2;
+    if (opt.lag_s > 0.0) lo = hi = opt.lag_s;  // given: no search
+    for (int it = 0; it < 60 && opt.lag_s <= 0.0; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      (term_rms(mid) < target ? lo : hi) = mid;
+    }
+    t.lag_s = 0.5 * (lo + hi);
+  }
+  if (opt.hidden != Hidden::none && opt.hidden != Hidden::torque_lag) {
     double hm = 0, hr = 0;
     for (double q : hid) hm += q;
     hm /= static_cast<double>(n);
@@ -158,6 +192,7 @@ Generated generate(const Options& opt) {
       case Hidden::quadratic_stiffness: t.K2 = scale; break;
       case Hidden::offset_drift: t.drift_rate = scale; break;
       case Hidden::friction: t.Fc = scale; break;
+      case Hidden::torque_lag:
       case Hidden::none: break;
     }
   }
@@ -166,9 +201,16 @@ Generated generate(const Options& opt) {
   rec.dt_s = dt;
   rec.pos_rad.resize(n);
   rec.torque_nm.resize(n);
+  // The joint torque (intrinsic, hidden term, the contraction's slow
+  // fluctuation); a torque-channel lag filters all of it, the cell's white
+  // noise enters after the filter.
+  double lagged = 0.0, prev_joint = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     col = a_col * col + std::sqrt(1.0 - a_col * a_col) * t.noise_coloured_nm * rng.normal();
-    const double tq = t.c + intr[i] + hid[i] + col + t.noise_white_nm * rng.normal();
+    const double joint = t.c + intr[i] + hid[i] + col;
+    lagged = i == 0 || t.lag_s <= 0.0 ? joint : first_order_lag_step(lagged, prev_joint, joint, t.lag_s, dt);
+    prev_joint = joint;
+    const double tq = lagged + t.noise_white_nm * rng.normal();
     rec.torque_nm[i] = t.torque_sign * tq;
     rec.pos_rad[i] = pos[i] + 2e-5 * rng.normal();  // encoder noise
   }

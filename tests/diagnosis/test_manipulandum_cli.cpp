@@ -4,10 +4,14 @@
 #include <sys/wait.h>
 
 #include <filesystem>
+#include <fstream>
 #include <string>
+
+#include <nlohmann/json.hpp>
 
 #include "fixtures.hpp"
 #include "manip/common/exit_codes.hpp"
+#include "manip/diagnosis/synthetic.hpp"
 #include "manip/logging/session_stream.hpp"
 
 using namespace manip;
@@ -100,4 +104,34 @@ TEST_CASE("make_hidden_session and manip_sim --pulse-duration, --pulse-amplitude
     CHECK(out.find("--pulse-duration") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(bad));
   }
+}
+
+TEST_CASE("diagnose_model --single-joint: a negative baseline B is a physical check in the text and the JSON, with the least torque lag") {
+  const auto dir = testutil::temp_dir("manip_cli_lag");
+  namespace syn = diagnosis::synthetic;
+  syn::Options o;
+  o.hidden = syn::Hidden::torque_lag;
+  o.seed = 7;  // middle magnitude: an 8.7 ms lag, baseline B < 0
+  const auto lagged = syn::generate(o);
+  syn::write_csv(lagged.record, dir + "/lag.csv", true);
+  o.hidden = syn::Hidden::none;
+  syn::write_csv(syn::generate(o).record, dir + "/clean.csv", true);
+  std::string out;
+  int rc = code(testutil::run_command(kDiag + " -q --single-joint " + dir + "/lag.csv --json " + dir + "/lag.json", &out));
+  INFO(out);
+  REQUIRE(rc == 0);
+  CHECK(out.find("Physical checks of the baseline:") != std::string::npos);
+  CHECK(out.find("torque channel behind the position channel") != std::string::npos);
+  std::ifstream jf(dir + "/lag.json");
+  const auto j = nlohmann::json::parse(jf);
+  REQUIRE(j.at("physical_checks").size() == 1);
+  CHECK(j["physical_checks"][0]["what"] == "B < 0");
+  const double least = j["physical_checks"][0]["least_torque_lag_s"].get<double>();
+  CHECK(least > 0.0);
+  CHECK(least <= lagged.truth.lag_s);
+  rc = code(testutil::run_command(kDiag + " -q --single-joint " + dir + "/clean.csv --json " + dir + "/clean.json", &out));
+  REQUIRE(rc == 0);
+  CHECK(out.find("Physical checks") == std::string::npos);
+  std::ifstream cf(dir + "/clean.json");
+  CHECK(nlohmann::json::parse(cf).at("physical_checks").empty());
 }

@@ -31,6 +31,18 @@ struct EngineOptions {
   // A shape parameter on the edge of its grid counts as implausible too (the
   // optimum lies outside the physical range searched).
   bool require_plausible = false;
+  // The weaker rule every diagnosis keeps (require_plausible implies it):
+  // refuse a candidate whose main parameter, when it is a shape, sits on the
+  // edge of its grid (the optimum lies outside the range the library calls
+  // physical: a "reflex" pinned to the 20 ms edge is a faster effect), or
+  // none of whose gains has its physical sign (a stretch reflex that
+  // assists stretch in both directions is not a stretch reflex; friction
+  // that drives the motion is not friction). Point values, as
+  // require_plausible; the sizes of the gains are not checked (some bounds
+  // are guesses: K2) and the other gains and shapes may sit outside (a true
+  // reflex's unstretched direction is often a little below 0, its damping at
+  // the grid's 1.0). Measured: docs/diagnosis.md, "Torque-channel lag".
+  bool require_physical = true;
   // Among the significant candidates accept the one with the largest t
   // statistic of the fold gains (most consistent held-out improvement) instead
   // of the largest mean gain: a mechanism with many free gains can reach a

@@ -66,4 +66,20 @@ struct SingleJointPrepared {
 [[nodiscard]] SingleJointPrepared prepare_single_joint(const SingleJointRecord& rec,
                                                        const SingleJointOptions& opt = {});
 
+// Physical checks of the baseline fit, one line each (empty: none fails).
+// A passive joint has B > 0 and I > 0. A first-order lag T of the torque
+// channel behind the position channel turns tau = (I s^2 + B s + K) x into
+// tau / (1 + T s) = K x + (B - T K) s x + (I - T B + T^2 K) s^2 x + O(s^3):
+// K is kept, B and I move along the data's own directions (velocity,
+// acceleration), so no column of the library can tell the lag from them
+// (measured: docs/diagnosis.md, "Torque-channel lag"). What the fit can say
+// is the least lag that explains a negative B: T >= -B / K.
+struct PhysicalCheck {
+  std::string what;        // "B < 0"
+  std::string text;        // the one-line finding
+  double least_lag_s = 0;  // B < 0: -B / K (the least torque-channel lag that explains it); else 0
+};
+struct Diagnosis;  // engine.hpp
+[[nodiscard]] std::vector<PhysicalCheck> single_joint_physical_checks(const Diagnosis& d);
+
 }  // namespace manip::diagnosis

@@ -12,14 +12,16 @@
 
 namespace manip::diagnosis::synthetic {
 
-enum class Hidden { none, reflex, quadratic_stiffness, offset_drift, friction };
+enum class Hidden { none, reflex, quadratic_stiffness, offset_drift, friction, torque_lag };
 [[nodiscard]] const char* name(Hidden h);          // "none", "stretch_reflex", ... (the engine's ids)
-[[nodiscard]] const char* main_param_name(Hidden h);  // "delay", "K2", "drift_rate", "Fc"
+[[nodiscard]] const char* main_param_name(Hidden h);  // "delay", "K2", "drift_rate", "Fc", "lag"
 
 struct Options {
   Hidden hidden = Hidden::none;
   // Hidden term's RMS torque as a fraction of the intrinsic (I, B, K) torque's RMS.
   double magnitude = 0.15;
+  // torque_lag only: > 0 sets the lag itself instead of the magnitude (s).
+  double lag_s = 0.0;
   double duration_s = 60.0;
   double dt_s = 0.001;
   std::uint64_t seed = 1;
@@ -35,6 +37,9 @@ struct Truth {
   double drift_rate = 0;  // N m/s
   double Fc = 0;          // N m, friction Fc tanh(v / v_s)
   double v_s = 0;         // rad/s
+  // torque_lag: the recorded torque is the joint torque through 1 / (1 + lag s)
+  // (exact first-order-hold discretisation of the continuous lag).
+  double lag_s = 0;
   double noise_white_nm = 0, noise_coloured_nm = 0;
   [[nodiscard]] double main_param(Hidden h) const;
 };
