@@ -24,6 +24,7 @@
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/diagnosis/report.hpp"
 #include "manip/diagnosis/single_joint.hpp"
+#include "manip/diagnosis/torque_lag.hpp"
 #include "manip/estimation/report/render.hpp"
 #include "manip/version.hpp"
 
@@ -220,14 +221,17 @@ int run(int argc, char** argv) {
                 rec.pos_rad.size(), rec.dt_s, sj.polyorder, prep.window, prep.cutoff_hz, prep.torque_sign,
                 prep.sign_flipped_automatically ? " (flipped: the record stores the reaction torque, baseline K was negative)" : "");
   ctx.preprocessing = buf;
+  const auto lag = diagnosis::fit_torque_lag(prep.data, res, lib, eo);
+  ctx.extra_text = diagnosis::torque_lag_text(lag);
   const auto checks = diagnosis::single_joint_physical_checks(res);
   if (!checks.empty()) {
-    ctx.extra_text = "\nPhysical checks of the baseline:\n";
+    ctx.extra_text += "\nPhysical checks of the baseline:\n";
     for (const auto& pc : checks) ctx.extra_text += "  " + pc.text + "\n";
   }
   std::cout << diagnosis::text_report(res, ctx);
   if (want_json) {
     auto j = diagnosis::json_report(res, ctx);
+    j["torque_lag"] = diagnosis::torque_lag_json(lag);
     j["physical_checks"] = nlohmann::json::array();
     for (const auto& pc : checks) {
       nlohmann::json e = {{"what", pc.what}, {"text", pc.text}};

@@ -224,8 +224,8 @@ std::vector<PhysicalCheck> single_joint_physical_checks(const Diagnosis& d) {
     c.least_lag_s = -b->est.value / k->est.value;
     c.text = "baseline B " + g4(b->est.value) + " N m s/rad < 0, which a passive joint cannot have: a lag T of the torque channel "
              "behind the position channel reads as B - T K (and I - T B + T^2 K), here T >= -B/K = " + g4(c.least_lag_s * 1e3) +
-             " ms (no mechanism can separate it from B and I: check the channels' timing with a rigid load), or the channels' sign "
-             "conventions differ";
+             " ms (the torque-channel lag fit above separates it from B and I when the response carries enough of it; a rigid "
+             "load times the channels for certain), or the channels' sign conventions differ";
     out.push_back(c);
   }
   if (i && i->est.hi < 0.0) {

@@ -9,12 +9,14 @@
 #include <cstdio>
 #include <algorithm>
 #include <cstdlib>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
 
 #include "diag_test_util.hpp"
 #include "manip/common/errors.hpp"
+#include "manip/diagnosis/torque_lag.hpp"
 
 using namespace manip::diagnosis;
 using manip::diagnosis::test::rel_err;
@@ -184,42 +186,111 @@ TEST_CASE("a torque lag that makes B negative is reported with the least lag tha
   CHECK(single_joint_physical_checks(run_synthetic(c).diag).empty());
 }
 
+TEST_CASE("a torque-channel lag is fitted by output error - T within 20 %, I, B, K at T - and none is found on a clean record", "[diagnosis][engine]") {
+  for (const bool lagged : {true, false}) {
+    synthetic::Options o;
+    o.hidden = lagged ? synthetic::Hidden::torque_lag : synthetic::Hidden::none;
+    o.magnitude = kMiddle;
+    o.seed = lagged ? 7 : 101;
+    const auto g = synthetic::generate(o);
+    const auto prep = prepare_single_joint(g.record);
+    EngineOptions eo;
+    eo.bootstrap = 50;
+    const auto lib = standard_library();
+    const auto d = diagnose(prep.data, lib, eo);
+    const auto f = fit_torque_lag(prep.data, d, lib, eo);
+    REQUIRE(f.done);
+    INFO("lagged " << lagged << ": p " << f.test.p_value << " T " << f.lag_s.value << " truth " << g.truth.lag_s);
+    CHECK(f.significant == lagged);
+    if (!lagged) continue;
+    CHECK(rel_err(f.lag_s.value, g.truth.lag_s) < 0.20);
+    auto at = [&](const char* n) {
+      for (const auto& q : f.params)
+        if (q.name == n) return q.est.value;
+      return std::numeric_limits<double>::quiet_NaN();
+    };
+    CHECK(rel_err(at("I"), g.truth.I) < 0.20);
+    CHECK(rel_err(at("B"), g.truth.B) < 0.20);
+    CHECK(rel_err(at("K"), g.truth.K) < 0.05);
+    CHECK(torque_lag_text(f).find("SIGNIFICANT") != std::string::npos);
+  }
+}
+
 // What the tool does with a torque-channel lag, over seeds and the study's
 // magnitudes (docs/diagnosis.md, "Torque-channel lag"):
 // build/tests/test_diagnosis "[.lagstudy]" -s
 TEST_CASE("torque-lag study", "[.lagstudy]") {
   const int seeds = 20;
-  std::printf("| magnitude | median lag, ms | nothing named | named first (ids) | K within 10 %% | B within 20 %%, baseline | B within 20 %%, after | B < 0 flagged | least lag <= truth | median |B_baseline - (B - T K)|, N m s/rad |\n|---|---|---|---|---|---|---|---|---|---|\n");
-  for (const double m : {0.05, 0.15, 0.40}) {
-    int none = 0, kok = 0, bok0 = 0, bok = 0, flagged = 0, bound_ok = 0;
-    std::vector<double> lags, dev;
+  std::printf("| magnitude | median lag, ms | nothing named | named first (ids) | K within 10 %% | B within 20 %%, baseline | B < 0 flagged | least lag <= truth | lag significant | lag within 20 %% | median T / truth | interval covers | B within 20 %% at T | I within 20 %% at T | K within 10 %% at T |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  for (const double m : {0.0, 0.05, 0.15, 0.40}) {
+    int none = 0, kok = 0, bok0 = 0, flagged = 0, bound_ok = 0, sig = 0, tok = 0, cover = 0, bl = 0, il = 0, kl = 0;
+    std::vector<double> lags, ratio;
     std::map<std::string, int> first;
     for (int s = 0; s < seeds; ++s) {
       synthetic::Options o;
-      o.hidden = synthetic::Hidden::torque_lag;
+      o.hidden = m > 0 ? synthetic::Hidden::torque_lag : synthetic::Hidden::none;
       o.magnitude = m;
-      o.seed = 2000 + static_cast<std::uint64_t>(s);
-      const auto r = run_synthetic(o, 100);
-      const auto& d = r.diag;
-      lags.push_back(r.truth.lag_s * 1e3);
+      o.seed = (m > 0 ? 2000 : 1000) + static_cast<std::uint64_t>(s);
+      const auto g = synthetic::generate(o);
+      const auto prep = prepare_single_joint(g.record);
+      EngineOptions eo;
+      eo.bootstrap = 100;
+      const auto lib = standard_library();
+      const auto d = diagnose(prep.data, lib, eo);
+      const auto& t = g.truth;
+      lags.push_back(t.lag_s * 1e3);
       if (d.misfit_found()) ++first[d.accepted.front()]; else ++none;
-      kok += rel_err(d.find_final("K")->est.value, r.truth.K) < 0.10;
-      bok0 += rel_err(d.find_baseline("B")->est.value, r.truth.B) < 0.20;
-      bok += rel_err(d.find_final("B")->est.value, r.truth.B) < 0.20;
-      dev.push_back(std::fabs(d.find_baseline("B")->est.value - (r.truth.B - r.truth.lag_s * r.truth.K)));
-      const auto checks = single_joint_physical_checks(d);
-      for (const auto& c : checks)
+      kok += rel_err(d.find_final("K")->est.value, t.K) < 0.10;
+      bok0 += rel_err(d.find_baseline("B")->est.value, t.B) < 0.20;
+      for (const auto& c : single_joint_physical_checks(d))
         if (c.what == "B < 0") {
           ++flagged;
-          bound_ok += c.least_lag_s <= r.truth.lag_s;
+          bound_ok += c.least_lag_s <= t.lag_s;
         }
+      const auto f = fit_torque_lag(prep.data, d, lib, eo);
+      if (!f.significant) continue;
+      ++sig;
+      if (t.lag_s > 0) {
+        tok += rel_err(f.lag_s.value, t.lag_s) < 0.2;
+        ratio.push_back(f.lag_s.value / t.lag_s);
+        cover += f.lag_s.lo <= t.lag_s && t.lag_s <= f.lag_s.hi;
+      }
+      auto at = [&](const char* n) {
+        for (const auto& q : f.params)
+          if (q.name == n) return q.est.value;
+        return std::numeric_limits<double>::quiet_NaN();
+      };
+      bl += rel_err(at("B"), t.B) < 0.2;
+      il += rel_err(at("I"), t.I) < 0.2;
+      kl += rel_err(at("K"), t.K) < 0.1;
     }
     std::sort(lags.begin(), lags.end());
-    std::sort(dev.begin(), dev.end());
+    std::sort(ratio.begin(), ratio.end());
     std::string ids;
     for (const auto& [id, n] : first) ids += (ids.empty() ? "" : ", ") + id + " " + std::to_string(n);
-    std::printf("| %.2f | %.2f | %d/%d | %s | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %.3f |\n", m, lags[lags.size() / 2], none, seeds, ids.c_str(), kok,
-                seeds, bok0, seeds, bok, seeds, flagged, seeds, bound_ok, flagged, dev[dev.size() / 2]);
+    std::printf("| %.2f | %.2f | %d/%d | %s | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %.3f | %d/%d | %d/%d | %d/%d | %d/%d |\n", m, lags[lags.size() / 2], none,
+                seeds, ids.c_str(), kok, seeds, bok0, seeds, flagged, seeds, bound_ok, flagged, sig, seeds, tok, seeds,
+                ratio.empty() ? NAN : ratio[ratio.size() / 2], cover, seeds, bl, sig, il, sig, kl, sig);
+    std::fflush(stdout);
+  }
+  // A lag where there is none: records with another hidden mechanism.
+  std::printf("\n| hidden (middle magnitude) | lag significant |\n|---|---|\n");
+  for (const auto h : {synthetic::Hidden::reflex, synthetic::Hidden::quadratic_stiffness, synthetic::Hidden::offset_drift,
+                       synthetic::Hidden::friction}) {
+    int sig = 0;
+    for (int s = 0; s < seeds; ++s) {
+      synthetic::Options o;
+      o.hidden = h;
+      o.magnitude = kMiddle;
+      o.seed = 2000 + static_cast<std::uint64_t>(s);
+      const auto g = synthetic::generate(o);
+      const auto prep = prepare_single_joint(g.record);
+      EngineOptions eo;
+      eo.bootstrap = 20;
+      const auto lib = standard_library();
+      sig += fit_torque_lag(prep.data, diagnose(prep.data, lib, eo), lib, eo).significant;
+    }
+    std::printf("| %s | %d/%d |\n", synthetic::name(h), sig, seeds);
     std::fflush(stdout);
   }
 }

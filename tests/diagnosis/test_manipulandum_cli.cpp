@@ -106,7 +106,7 @@ TEST_CASE("make_hidden_session and manip_sim --pulse-duration, --pulse-amplitude
   }
 }
 
-TEST_CASE("diagnose_model --single-joint: a negative baseline B is a physical check in the text and the JSON, with the least torque lag") {
+TEST_CASE("diagnose_model --single-joint: a torque lag is fitted and a negative baseline B is a physical check, in the text and the JSON") {
   const auto dir = testutil::temp_dir("manip_cli_lag");
   namespace syn = diagnosis::synthetic;
   syn::Options o;
@@ -129,9 +129,15 @@ TEST_CASE("diagnose_model --single-joint: a negative baseline B is a physical ch
   const double least = j["physical_checks"][0]["least_torque_lag_s"].get<double>();
   CHECK(least > 0.0);
   CHECK(least <= lagged.truth.lag_s);
+  // The output-error fit names the lag and its value (test_engine.cpp has the accuracy).
+  CHECK(out.find("Torque-channel lag") != std::string::npos);
+  CHECK(j.at("torque_lag").at("significant").get<bool>());
+  CHECK(j["torque_lag"]["lag_s"]["value"].get<double>() > least);
   rc = code(testutil::run_command(kDiag + " -q --single-joint " + dir + "/clean.csv --json " + dir + "/clean.json", &out));
   REQUIRE(rc == 0);
   CHECK(out.find("Physical checks") == std::string::npos);
   std::ifstream cf(dir + "/clean.json");
-  CHECK(nlohmann::json::parse(cf).at("physical_checks").empty());
+  const auto jc = nlohmann::json::parse(cf);
+  CHECK(jc.at("physical_checks").empty());
+  CHECK_FALSE(jc.at("torque_lag").at("significant").get<bool>());
 }

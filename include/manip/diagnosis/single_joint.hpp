@@ -71,8 +71,9 @@ struct SingleJointPrepared {
 // channel behind the position channel turns tau = (I s^2 + B s + K) x into
 // tau / (1 + T s) = K x + (B - T K) s x + (I - T B + T^2 K) s^2 x + O(s^3):
 // K is kept, B and I move along the data's own directions (velocity,
-// acceleration), so no column of the library can tell the lag from them
-// (measured: docs/diagnosis.md, "Torque-channel lag"). What the fit can say
+// acceleration), so no column added to the baseline tells the lag from them
+// (the output-error fit of torque_lag.hpp does, from the O(s^3) part;
+// docs/diagnosis.md, "Torque-channel lag"). What the baseline alone can say
 // is the least lag that explains a negative B: T >= -B / K.
 struct PhysicalCheck {
   std::string what;        // "B < 0"
