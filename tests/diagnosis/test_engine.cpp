@@ -24,7 +24,29 @@ using manip::diagnosis::test::run_synthetic;
 
 namespace {
 constexpr double kMiddle = 0.15;  // hidden torque RMS / intrinsic torque RMS (docs/diagnosis.md)
+
+// A synthetic record through the diagnosis and then the torque-lag fit.
+struct LagRun {
+  synthetic::Generated g;
+  Diagnosis d;
+  TorqueLagFit f;
+};
+LagRun run_lag(const synthetic::Options& o, int bootstrap) {
+  LagRun r{synthetic::generate(o), {}, {}};
+  const auto prep = prepare_single_joint(r.g.record);
+  EngineOptions eo;
+  eo.bootstrap = bootstrap;
+  const auto lib = standard_library();
+  r.d = diagnose(prep.data, lib, eo);
+  r.f = fit_torque_lag(prep.data, r.d, lib, eo);
+  return r;
 }
+double lag_param(const TorqueLagFit& f, const char* name) {
+  for (const auto& q : f.params)
+    if (q.name == name) return q.est.value;
+  return std::numeric_limits<double>::quiet_NaN();
+}
+}  // namespace
 
 TEST_CASE("clean record: no significant misfit", "[diagnosis][engine]") {
   synthetic::Options o;
@@ -192,26 +214,17 @@ TEST_CASE("a torque-channel lag is fitted by output error - T within 20 %, I, B,
     o.hidden = lagged ? synthetic::Hidden::torque_lag : synthetic::Hidden::none;
     o.magnitude = kMiddle;
     o.seed = lagged ? 7 : 101;
-    const auto g = synthetic::generate(o);
-    const auto prep = prepare_single_joint(g.record);
-    EngineOptions eo;
-    eo.bootstrap = 50;
-    const auto lib = standard_library();
-    const auto d = diagnose(prep.data, lib, eo);
-    const auto f = fit_torque_lag(prep.data, d, lib, eo);
+    const auto r = run_lag(o, 50);
+    const auto& g = r.g;
+    const auto& f = r.f;
     REQUIRE(f.done);
     INFO("lagged " << lagged << ": p " << f.test.p_value << " T " << f.lag_s.value << " truth " << g.truth.lag_s);
     CHECK(f.significant == lagged);
     if (!lagged) continue;
     CHECK(rel_err(f.lag_s.value, g.truth.lag_s) < 0.20);
-    auto at = [&](const char* n) {
-      for (const auto& q : f.params)
-        if (q.name == n) return q.est.value;
-      return std::numeric_limits<double>::quiet_NaN();
-    };
-    CHECK(rel_err(at("I"), g.truth.I) < 0.20);
-    CHECK(rel_err(at("B"), g.truth.B) < 0.20);
-    CHECK(rel_err(at("K"), g.truth.K) < 0.05);
+    CHECK(rel_err(lag_param(f, "I"), g.truth.I) < 0.20);
+    CHECK(rel_err(lag_param(f, "B"), g.truth.B) < 0.20);
+    CHECK(rel_err(lag_param(f, "K"), g.truth.K) < 0.05);
     CHECK(torque_lag_text(f).find("SIGNIFICANT") != std::string::npos);
   }
 }
@@ -231,13 +244,10 @@ TEST_CASE("torque-lag study", "[.lagstudy]") {
       o.hidden = m > 0 ? synthetic::Hidden::torque_lag : synthetic::Hidden::none;
       o.magnitude = m;
       o.seed = (m > 0 ? 2000 : 1000) + static_cast<std::uint64_t>(s);
-      const auto g = synthetic::generate(o);
-      const auto prep = prepare_single_joint(g.record);
-      EngineOptions eo;
-      eo.bootstrap = 100;
-      const auto lib = standard_library();
-      const auto d = diagnose(prep.data, lib, eo);
-      const auto& t = g.truth;
+      const auto r = run_lag(o, 100);
+      const auto& d = r.d;
+      const auto& f = r.f;
+      const auto& t = r.g.truth;
       lags.push_back(t.lag_s * 1e3);
       if (d.misfit_found()) ++first[d.accepted.front()]; else ++none;
       kok += rel_err(d.find_final("K")->est.value, t.K) < 0.10;
@@ -247,7 +257,6 @@ TEST_CASE("torque-lag study", "[.lagstudy]") {
           ++flagged;
           bound_ok += c.least_lag_s <= t.lag_s;
         }
-      const auto f = fit_torque_lag(prep.data, d, lib, eo);
       if (!f.significant) continue;
       ++sig;
       if (t.lag_s > 0) {
@@ -255,14 +264,9 @@ TEST_CASE("torque-lag study", "[.lagstudy]") {
         ratio.push_back(f.lag_s.value / t.lag_s);
         cover += f.lag_s.lo <= t.lag_s && t.lag_s <= f.lag_s.hi;
       }
-      auto at = [&](const char* n) {
-        for (const auto& q : f.params)
-          if (q.name == n) return q.est.value;
-        return std::numeric_limits<double>::quiet_NaN();
-      };
-      bl += rel_err(at("B"), t.B) < 0.2;
-      il += rel_err(at("I"), t.I) < 0.2;
-      kl += rel_err(at("K"), t.K) < 0.1;
+      bl += rel_err(lag_param(f, "B"), t.B) < 0.2;
+      il += rel_err(lag_param(f, "I"), t.I) < 0.2;
+      kl += rel_err(lag_param(f, "K"), t.K) < 0.1;
     }
     std::sort(lags.begin(), lags.end());
     std::sort(ratio.begin(), ratio.end());
@@ -283,12 +287,7 @@ TEST_CASE("torque-lag study", "[.lagstudy]") {
       o.hidden = h;
       o.magnitude = kMiddle;
       o.seed = 2000 + static_cast<std::uint64_t>(s);
-      const auto g = synthetic::generate(o);
-      const auto prep = prepare_single_joint(g.record);
-      EngineOptions eo;
-      eo.bootstrap = 20;
-      const auto lib = standard_library();
-      sig += fit_torque_lag(prep.data, diagnose(prep.data, lib, eo), lib, eo).significant;
+      sig += run_lag(o, 20).f.significant;
     }
     std::printf("| %s | %d/%d |\n", synthetic::name(h), sig, seeds);
     std::fflush(stdout);
