@@ -185,7 +185,7 @@ TorqueLagFit fit_torque_lag(const Dataset& d, const Diagnosis& res, const std::v
     return solve(s);
   };
   const VectorXd th = params_at(lag_all, all);
-  const VectorXd th0 = params_at(0.0, all);
+  const VectorXd th0 = solve(total(0, all));  // T = 0 is the grid's first point
   // Block bootstrap: the lag (grid and parabola) and the gains at it.
   std::vector<double> lags;
   std::vector<std::vector<double>> gains(static_cast<std::size_t>(p));
