@@ -220,7 +220,7 @@ int run(int argc, char** argv) {
                 "%zu samples at %.6g s; Savitzky-Golay order %d, window %d (-3 dB at %.1f Hz) on position and torque; torque sign %+d%s",
                 rec.pos_rad.size(), rec.dt_s, sj.polyorder, prep.window, prep.cutoff_hz, prep.torque_sign,
                 prep.sign_flipped_automatically ? " (flipped: the record stores the reaction torque, baseline K was negative)" : "");
-  ctx.preprocessing = buf;
+  ctx.preprocessing = rec.columns_note.empty() ? std::string(buf) : rec.columns_note + "\n  " + buf;
   const auto lag = diagnosis::fit_torque_lag(prep.data, res, lib, eo);
   ctx.extra_text = diagnosis::torque_lag_text(lag);
   const auto checks = diagnosis::single_joint_physical_checks(res);

@@ -56,7 +56,10 @@ if [ "${MANIP_SKIP_SANITIZERS:-0}" != "1" ]; then
   # manipulandum session (143 s alone, 17 s in Release): the one case that
   # takes diagnose_model's manipulandum front end and likelihood stage
   # end to end through the sanitizers.
-  asan_skip="diagnosis:(manipulandum: (hidden|likelihood check on a short session)|planar sensor: hidden)"
+  # The quoted ankle reports (docs/diagnosis-ankle.md) are compared digit for
+  # digit with the Release build's output; the single-joint pipeline itself
+  # stays in this pass through its synthetic records.
+  asan_skip="diagnosis:(manipulandum: (hidden|likelihood check on a short session)|planar sensor: hidden|docs/diagnosis-ankle.md)"
   (cd build-asan && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --output-on-failure -j "$jobs" -LE no_sanitize -E "$asan_skip")
 fi

@@ -30,11 +30,7 @@ namespace {
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
-struct Block {
-  std::size_t seg = 0, begin = 0, end = 0;
-  int fold = 0;
-  std::size_t unit = 0;  // resampling unit of the bootstrap (a trial: both axes of a planar trial share it)
-};
+using Block = CvBlock;
 
 // Sufficient statistics of a least-squares problem over some samples.
 struct Stats {
@@ -347,71 +343,6 @@ Signatures signatures(const Dataset& d, const std::vector<Block>& /*blocks*/, co
   return s;
 }
 
-std::vector<Block> make_blocks(const Dataset& d, const EngineOptions& opt, std::size_t history) {
-  std::vector<Block> blocks;
-  const int K = opt.folds;
-  const auto nseg = d.segments.size();
-  if (nseg == 0) throw InputError(d.source + ": no data");
-  // Units: a segment's group (planar: the trial, both axes), else the segment itself.
-  std::vector<int> unit_key(nseg);
-  for (std::size_t s = 0; s < nseg; ++s) unit_key[s] = d.segments[s].group >= 0 ? d.segments[s].group : -1 - static_cast<int>(s);
-  std::vector<int> keys(unit_key);
-  std::sort(keys.begin(), keys.end());
-  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-  const bool grouped = std::any_of(d.segments.begin(), d.segments.end(), [](const Segment& g) { return g.group >= 0; });
-  if (grouped && keys.size() < static_cast<std::size_t>(K))
-    throw InputError(d.source + ": " + std::to_string(keys.size()) + " usable trials: " + std::to_string(K) +
-                     "-fold cross-validation over trials needs at least " + std::to_string(K));
-  if (keys.size() >= static_cast<std::size_t>(K)) {  // segments (trials) are the units; folds group neighbours
-    // Units in order of first appearance (time order), folds of neighbouring units.
-    std::vector<std::size_t> rank(nseg);
-    std::vector<int> order;
-    for (std::size_t s = 0; s < nseg; ++s) {
-      auto it = std::find(order.begin(), order.end(), unit_key[s]);
-      if (it == order.end()) {
-        order.push_back(unit_key[s]);
-        it = order.end() - 1;
-      }
-      rank[s] = static_cast<std::size_t>(it - order.begin());
-    }
-    const std::size_t nu = order.size();
-    for (std::size_t s = 0; s < nseg; ++s) {
-      const auto& g = d.segments[s];
-      if (g.first + history >= g.last)
-        throw InputError(d.source + ": segment " + std::to_string(s) + " shorter than the " +
-                         std::to_string(static_cast<double>(history) * d.dt_s) + " s of history the mechanisms need");
-      blocks.push_back({s, g.first + history, g.last, static_cast<int>(rank[s] * static_cast<std::size_t>(K) / nu), rank[s]});
-    }
-    return blocks;
-  }
-  if (nseg != 1)
-    throw InputError(d.source + ": " + std::to_string(nseg) + " segments: cross-validation needs one continuous record or at least " +
-                     std::to_string(K) + " segments");
-  const auto& g = d.segments[0];
-  const auto guard = static_cast<std::size_t>(std::ceil(opt.guard_s / d.dt_s));
-  const auto minfold = static_cast<std::size_t>(std::ceil(opt.min_fold_s / d.dt_s));
-  const std::size_t lo = g.first + history;
-  const double need_s = static_cast<double>(history + static_cast<std::size_t>(K) * (minfold + guard) + (g.y.size() - g.last) + g.first) * d.dt_s;
-  if (lo >= g.last || (g.last - lo) < static_cast<std::size_t>(K) * (minfold + guard))
-  {
-    char msg[160];
-    std::snprintf(msg, sizeof msg, ": record too short for %d-fold cross-validation: %.1f s, need at least %.1f s", K,
-                  static_cast<double>(g.y.size()) * d.dt_s, need_s);
-    throw InputError(d.source + msg);
-  }
-  const std::size_t L = g.last - lo;
-  for (int k = 0; k < K; ++k) {
-    std::size_t a = lo + L * static_cast<std::size_t>(k) / static_cast<std::size_t>(K);
-    std::size_t b = lo + L * static_cast<std::size_t>(k + 1) / static_cast<std::size_t>(K);
-    if (k > 0) a += guard / 2;
-    if (k < K - 1) b -= (guard + 1) / 2;
-    const auto m = static_cast<std::size_t>(opt.blocks_per_fold);
-    for (std::size_t j = 0; j < m; ++j)
-      blocks.push_back({0, a + (b - a) * j / m, a + (b - a) * (j + 1) / m, k, blocks.size()});
-  }
-  return blocks;
-}
-
 // Held-out prediction: fold k's samples predicted by model_of(k) fitted on
 // the other folds (NaN outside the blocks).
 std::vector<std::vector<double>> heldout_predict(const Dataset& d, const std::vector<Block>& blocks, int folds,
@@ -489,6 +420,71 @@ std::vector<std::vector<double>> multinomial_weights(const std::vector<Block>& b
 
 }  // namespace
 
+std::vector<CvBlock> cv_blocks(const Dataset& d, const EngineOptions& opt, std::size_t history) {
+  std::vector<Block> blocks;
+  const int K = opt.folds;
+  const auto nseg = d.segments.size();
+  if (nseg == 0) throw InputError(d.source + ": no data");
+  // Units: a segment's group (planar: the trial, both axes), else the segment itself.
+  std::vector<int> unit_key(nseg);
+  for (std::size_t s = 0; s < nseg; ++s) unit_key[s] = d.segments[s].group >= 0 ? d.segments[s].group : -1 - static_cast<int>(s);
+  std::vector<int> keys(unit_key);
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  const bool grouped = std::any_of(d.segments.begin(), d.segments.end(), [](const Segment& g) { return g.group >= 0; });
+  if (grouped && keys.size() < static_cast<std::size_t>(K))
+    throw InputError(d.source + ": " + std::to_string(keys.size()) + " usable trials: " + std::to_string(K) +
+                     "-fold cross-validation over trials needs at least " + std::to_string(K));
+  if (keys.size() >= static_cast<std::size_t>(K)) {  // segments (trials) are the units; folds group neighbours
+    // Units in order of first appearance (time order), folds of neighbouring units.
+    std::vector<std::size_t> rank(nseg);
+    std::vector<int> order;
+    for (std::size_t s = 0; s < nseg; ++s) {
+      auto it = std::find(order.begin(), order.end(), unit_key[s]);
+      if (it == order.end()) {
+        order.push_back(unit_key[s]);
+        it = order.end() - 1;
+      }
+      rank[s] = static_cast<std::size_t>(it - order.begin());
+    }
+    const std::size_t nu = order.size();
+    for (std::size_t s = 0; s < nseg; ++s) {
+      const auto& g = d.segments[s];
+      if (g.first + history >= g.last)
+        throw InputError(d.source + ": segment " + std::to_string(s) + " shorter than the " +
+                         std::to_string(static_cast<double>(history) * d.dt_s) + " s of history the mechanisms need");
+      blocks.push_back({s, g.first + history, g.last, static_cast<int>(rank[s] * static_cast<std::size_t>(K) / nu), rank[s]});
+    }
+    return blocks;
+  }
+  if (nseg != 1)
+    throw InputError(d.source + ": " + std::to_string(nseg) + " segments: cross-validation needs one continuous record or at least " +
+                     std::to_string(K) + " segments");
+  const auto& g = d.segments[0];
+  const auto guard = static_cast<std::size_t>(std::ceil(opt.guard_s / d.dt_s));
+  const auto minfold = static_cast<std::size_t>(std::ceil(opt.min_fold_s / d.dt_s));
+  const std::size_t lo = g.first + history;
+  const double need_s = static_cast<double>(history + static_cast<std::size_t>(K) * (minfold + guard) + (g.y.size() - g.last) + g.first) * d.dt_s;
+  if (lo >= g.last || (g.last - lo) < static_cast<std::size_t>(K) * (minfold + guard))
+  {
+    char msg[160];
+    std::snprintf(msg, sizeof msg, ": record too short for %d-fold cross-validation: %.1f s, need at least %.1f s", K,
+                  static_cast<double>(g.y.size()) * d.dt_s, need_s);
+    throw InputError(d.source + msg);
+  }
+  const std::size_t L = g.last - lo;
+  for (int k = 0; k < K; ++k) {
+    std::size_t a = lo + L * static_cast<std::size_t>(k) / static_cast<std::size_t>(K);
+    std::size_t b = lo + L * static_cast<std::size_t>(k + 1) / static_cast<std::size_t>(K);
+    if (k > 0) a += guard / 2;
+    if (k < K - 1) b -= (guard + 1) / 2;
+    const auto m = static_cast<std::size_t>(opt.blocks_per_fold);
+    for (std::size_t j = 0; j < m; ++j)
+      blocks.push_back({0, a + (b - a) * j / m, a + (b - a) * (j + 1) / m, k, blocks.size()});
+  }
+  return blocks;
+}
+
 Fit fit_full(const Dataset& d, const std::vector<const Columns*>& extras, std::size_t skip) {
   Model m{extras};
   std::vector<Block> blocks;
@@ -517,7 +513,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
   std::size_t history = 0;
   for (const auto& m : lib)
     if (m->not_applicable(d).empty()) history = std::max(history, m->history_samples(d));
-  const auto blocks = make_blocks(d, opt, history);
+  const auto blocks = cv_blocks(d, opt, history);
   out.folds = opt.folds;
   out.blocks = static_cast<int>(blocks.size());
   out.guard_s = opt.guard_s;

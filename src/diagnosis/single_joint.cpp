@@ -1,6 +1,7 @@
 #include "manip/diagnosis/single_joint.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 #include <charconv>
@@ -43,6 +44,63 @@ bool parse_double(const std::string& s, double& v) {
   return ec == std::errc() && ptr == e && std::isfinite(v);
 }
 
+// "['pos1', 'tq1']" (a MATLAB/Python export's channel list) -> {pos1, tq1}
+std::vector<std::string> parse_channel_list(std::string_view s) {
+  const auto close = s.find(']');
+  if (close != std::string_view::npos) s = s.substr(0, close);
+  std::vector<std::string> out;
+  std::string cur;
+  auto flush = [&] {
+    const auto n = trim(cur);
+    if (!n.empty()) out.push_back(n);
+    cur.clear();
+  };
+  for (char ch : s) {
+    if (ch == ',' || ch == ';') flush();
+    else if (ch != '[' && ch != '\'' && ch != '"') cur += ch;
+  }
+  flush();
+  return out;
+}
+
+struct ChannelMap {
+  int time = -1, pos = -1, torque = -1;
+  std::string error;
+};
+
+// Channel names carry no units in such exports (the ankle records' "pos1",
+// "tq1"): the layout's units (rad, N m) are assumed, and a name that says
+// degrees is refused rather than silently taken as radians. A role found
+// twice is ambiguous and leaves the mapping to the positional layout or to
+// a header line.
+ChannelMap classify_channels(const std::vector<std::string>& names) {
+  ChannelMap m;
+  int n_pos = 0, n_torque = 0, n_time = 0;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    std::string l = names[i];
+    for (auto& ch : l) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    const auto has = [&](const char* w) { return l.find(w) != std::string::npos; };
+    const auto starts = [&](const char* w) { return l.rfind(w, 0) == 0; };
+    const int idx = static_cast<int>(i);
+    if (l == "t" || l == "t_s" || starts("time")) {
+      m.time = idx;
+      ++n_time;
+    } else if (starts("pos") || has("angle") || has("theta")) {
+      if (has("deg")) {
+        m.error = "channel '" + names[i] + "' looks like degrees; the layout needs radians";
+        return m;
+      }
+      m.pos = idx;
+      ++n_pos;
+    } else if (starts("tq") || starts("trq") || has("torque") || has("moment")) {
+      m.torque = idx;
+      ++n_torque;
+    }
+  }
+  if (n_pos != 1 || n_torque != 1 || n_time > 1) return ChannelMap{};
+  return m;
+}
+
 }  // namespace
 
 SingleJointRecord read_single_joint_csv(const std::string& path) {
@@ -52,11 +110,19 @@ SingleJointRecord read_single_joint_csv(const std::string& path) {
   rec.source = path;
   double dt_header = 0.0;
   bool have_dt_header = false;
+  std::vector<std::string> channels;  // from a "channels=[...]" comment
+  int channels_line = 0;
   int col_t = -1, col_p = -1, col_q = -1, ncols = -1;
+  std::vector<std::string> names;  // of the columns, when known
   std::vector<double> time;
   std::string line;
   int lineno = 0;
   auto fail = [&](const std::string& why) { throw InputError(path + ":" + std::to_string(lineno) + ": " + why); };
+  auto name_list = [](const std::vector<std::string>& n) {
+    std::string out;
+    for (const auto& x : n) out += (out.empty() ? "" : ", ") + x;
+    return out;
+  };
   while (std::getline(in, line)) {
     ++lineno;
     const std::string t = trim(line);
@@ -71,45 +137,83 @@ SingleJointRecord read_single_joint_csv(const std::string& path) {
           fail("\"dt=\" must be a positive number of seconds (got \"" + t.substr(k + 3, e - k - 3) + "\")");
         have_dt_header = true;
       }
+      const auto c = t.find("channels=");
+      if (c != std::string::npos) {
+        if (channels_line) fail("second \"channels=\"");
+        channels = parse_channel_list(t.substr(c + 9));
+        if (channels.empty()) fail("\"channels=\" names no channel");
+        channels_line = lineno;
+      }
       continue;
     }
     const auto f = split_fields(t);
     if (ncols < 0) {
+      ncols = static_cast<int>(f.size());
       double probe = 0.0;
-      if (!parse_double(f[0], probe)) {  // column-header line
-        ncols = static_cast<int>(f.size());
+      if (!parse_double(f[0], probe)) {  // column-header line: the unit-carrying names, other columns ignored
+        names = f;
         for (int i = 0; i < ncols; ++i) {
           const auto& name = f[static_cast<std::size_t>(i)];
           int* slot = name == "time_s" ? &col_t : name == "pos_rad" ? &col_p : name == "torque_nm" ? &col_q : nullptr;
-          if (!slot) fail("unknown column \"" + name + "\" (expected time_s, pos_rad, torque_nm)");
+          if (!slot) continue;
           if (*slot >= 0) fail("column \"" + name + "\" given twice");
           *slot = i;
         }
-        if (col_p < 0 || col_q < 0) fail("header must name pos_rad and torque_nm");
+        if (col_p < 0 || col_q < 0)
+          fail("header must name pos_rad and torque_nm (columns: " + name_list(f) + ")");
         continue;
       }
-      ncols = static_cast<int>(f.size());
-      if (ncols == 2) {
-        col_p = 0;
-        col_q = 1;
-      } else if (ncols == 3) {
-        col_t = 0;
-        col_p = 1;
-        col_q = 2;
-      } else {
-        fail("expected 2 columns (pos_rad, torque_nm) or 3 (time_s, pos_rad, torque_nm), got " +
-             std::to_string(ncols));
+      if (!channels.empty()) {
+        if (static_cast<int>(channels.size()) != ncols)
+          fail("\"channels=\" (line " + std::to_string(channels_line) + ") names " + std::to_string(channels.size()) +
+               " channels, the data has " + std::to_string(ncols) + " fields");
+        const auto m = classify_channels(channels);
+        if (!m.error.empty()) fail("\"channels=\" (line " + std::to_string(channels_line) + "): " + m.error);
+        if (m.pos >= 0 && m.torque >= 0) {
+          col_t = m.time;
+          col_p = m.pos;
+          col_q = m.torque;
+          names = channels;
+        }
+      }
+      if (col_p < 0) {
+        if (ncols == 2) {
+          col_p = 0;
+          col_q = 1;
+        } else if (ncols == 3) {
+          col_t = 0;
+          col_p = 1;
+          col_q = 2;
+        } else {
+          fail("expected 2 columns (pos_rad, torque_nm) or 3 (time_s, pos_rad, torque_nm), got " + std::to_string(ncols) +
+               (channels.empty() ? "" : " and \"channels=\" names no single position and torque channel (" +
+                                            name_list(channels) + ")") +
+               "; a header line naming pos_rad and torque_nm selects columns (others are ignored)");
+        }
       }
     }
     if (static_cast<int>(f.size()) != ncols)
       fail("expected " + std::to_string(ncols) + " fields, got " + std::to_string(f.size()));
     double v[3] = {0, 0, 0};
-    for (int i = 0; i < ncols; ++i)
-      if (!parse_double(f[static_cast<std::size_t>(i)], v[i]))
+    const int used[3] = {col_t, col_p, col_q};
+    for (int u = 0; u < 3; ++u) {
+      const int i = used[u];
+      if (i < 0) continue;
+      if (!parse_double(f[static_cast<std::size_t>(i)], v[u]))
         fail("field " + std::to_string(i + 1) + " is not a finite number (\"" + f[static_cast<std::size_t>(i)] + "\")");
-    if (col_t >= 0) time.push_back(v[col_t]);
-    rec.pos_rad.push_back(v[col_p]);
-    rec.torque_nm.push_back(v[col_q]);
+    }
+    if (col_t >= 0) time.push_back(v[0]);
+    rec.pos_rad.push_back(v[1]);
+    rec.torque_nm.push_back(v[2]);
+  }
+  if (!names.empty() && !(ncols == 2 && col_p == 0 && col_q == 1) && !(ncols == 3 && col_t == 0 && col_p == 1 && col_q == 2)) {
+    auto col = [&](int i) { return "'" + names[static_cast<std::size_t>(i)] + "' (" + std::to_string(i + 1) + ")"; };
+    rec.columns_note = "columns by name: position " + col(col_p) + ", torque " + col(col_q);
+    if (col_t >= 0) rec.columns_note += ", time " + col(col_t);
+    std::string ignored;
+    for (int i = 0; i < ncols; ++i)
+      if (i != col_t && i != col_p && i != col_q) ignored += (ignored.empty() ? "" : ", ") + col(i);
+    if (!ignored.empty()) rec.columns_note += "; ignored " + ignored;
   }
   if (rec.pos_rad.size() < 2) throw InputError(path + ": no data rows (need position and torque samples)");
   if (col_t >= 0) {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "manip/common/errors.hpp"
 #include "manip/common/rng.hpp"
 #include "manip/diagnosis/report.hpp"
 
@@ -76,28 +77,18 @@ TorqueLagFit fit_torque_lag(const Dataset& d, const Diagnosis& res, const std::v
         }
       }
   const auto p = static_cast<Eigen::Index>(cols.size());
-  // Blocks as the engine's (engine.cpp, make_blocks): K folds of
-  // blocks_per_fold blocks, guard gaps between folds.
-  const int K = opt.folds;
-  const auto guard = static_cast<std::size_t>(std::ceil(opt.guard_s / d.dt_s));
-  const std::size_t lo = g.first + history;
-  if (K < 3 || lo >= g.last || g.last - lo < static_cast<std::size_t>(K) * (guard + 10)) {
-    f.why_not = "record too short for the lag's cross-validation";
+  // The engine's cross-validation design, so the lag's folds are the search's.
+  if (opt.folds < 3) {
+    f.why_not = "the lag's cross-validation needs at least 3 folds";
     return f;
   }
-  struct Span {
-    std::size_t begin, end;
-    int fold;
-  };
-  std::vector<Span> spans;
-  const std::size_t L = g.last - lo;
-  const auto m = static_cast<std::size_t>(std::max(opt.blocks_per_fold, 1));
-  for (int k = 0; k < K; ++k) {
-    std::size_t a = lo + L * static_cast<std::size_t>(k) / static_cast<std::size_t>(K);
-    std::size_t b = lo + L * static_cast<std::size_t>(k + 1) / static_cast<std::size_t>(K);
-    if (k > 0) a += guard / 2;
-    if (k < K - 1) b -= (guard + 1) / 2;
-    for (std::size_t j = 0; j < m; ++j) spans.push_back({a + (b - a) * j / m, a + (b - a) * (j + 1) / m, k});
+  const int K = opt.folds;
+  std::vector<CvBlock> spans;
+  try {
+    spans = cv_blocks(d, opt, history);
+  } catch (const InputError&) {
+    f.why_not = "record too short for the lag's cross-validation";
+    return f;
   }
   // With a configured inertia the target is tau_m - I a; the lag acts on
   // I a too: target(T) = y + I a - I LP_T[a].

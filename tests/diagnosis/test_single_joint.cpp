@@ -44,6 +44,38 @@ TEST_CASE("CSV layouts: dt header with two columns, time column, named header", 
   CHECK(c.torque_nm[0] == 7.0);
 }
 
+TEST_CASE("CSV columns chosen by name: a channels= list in any order with extra channels, a header with extra columns", "[diagnosis][csv]") {
+  // An export with EMG next to the two channels, and the torque first.
+  const auto a = read_single_joint_csv(
+      write("ch1.csv", "# dt=0.001; channels=['tq1', 'emgGS', 'pos1', 'emgTA']\n-2.7,0.3,0.07,x\n-2.6,0.2,0.08,y\n"));
+  REQUIRE(a.pos_rad.size() == 2);
+  CHECK(a.pos_rad[1] == 0.08);
+  CHECK(a.torque_nm[0] == -2.7);
+  CHECK(a.columns_note == "columns by name: position 'pos1' (3), torque 'tq1' (1); ignored 'emgGS' (2), 'emgTA' (4)");
+  // Two channels in the default order: the default layout, no note.
+  const auto b = read_single_joint_csv(write("ch2.csv", "# dt=0.001; channels=['pos1', 'tq1']\n0.07,-2.7\n0.08,-2.6\n"));
+  CHECK(b.columns_note.empty());
+  CHECK(b.torque_nm[1] == -2.6);
+  // Names that say nothing fall back to the positional layout.
+  const auto c = read_single_joint_csv(write("ch3.csv", "# dt=0.001; channels=['a', 'b']\n0.07,-2.7\n0.08,-2.6\n"));
+  CHECK(c.pos_rad[0] == 0.07);
+  CHECK(c.torque_nm[0] == -2.7);
+  // A header line with an extra column: ignored and said.
+  const auto d = read_single_joint_csv(write("ch4.csv", "time_s,emg_v,pos_rad,torque_nm\n0.0,1,0.1,5\n0.01,2,0.2,6\n"));
+  CHECK(d.dt_s == Approx(0.01));
+  CHECK(d.pos_rad[1] == 0.2);
+  CHECK(d.columns_note.find("ignored 'emg_v' (2)") != std::string::npos);
+  // Errors: wrong channel count, degrees, unresolvable extra columns.
+  const auto e1 = write("ch5.csv", "# dt=0.001; channels=['pos1', 'tq1']\n0.07,-2.7,1\n");
+  CHECK(error_of(e1) == e1 + ":2: \"channels=\" (line 1) names 2 channels, the data has 3 fields");
+  const auto e2 = write("ch6.csv", "# dt=0.001; channels=['pos_deg', 'tq1']\n0.07,-2.7\n");
+  CHECK(error_of(e2) == e2 + ":2: \"channels=\" (line 1): channel 'pos_deg' looks like degrees; the layout needs radians");
+  const auto e3 = write("ch7.csv", "# dt=0.001; channels=['pos1', 'pos2', 'tq1', 'tq2']\n1,2,3,4\n");
+  CHECK(error_of(e3).find(":2: expected 2 columns (pos_rad, torque_nm) or 3 (time_s, pos_rad, torque_nm), got 4 and "
+                          "\"channels=\" names no single position and torque channel (pos1, pos2, tq1, tq2)") !=
+        std::string::npos);
+}
+
 TEST_CASE("CSV errors name the file and the line", "[diagnosis][csv]") {
   const auto p1 = write("e1.csv", "# dt=0.001\n0.1,0.2\n0.1,abc\n");
   CHECK(error_of(p1) == p1 + ":3: field 2 is not a finite number (\"abc\")");
@@ -56,7 +88,7 @@ TEST_CASE("CSV errors name the file and the line", "[diagnosis][csv]") {
   const auto p5 = write("e5.csv", "0.0,1,2\n0.001,1,2\n0.003,1,2\n");
   CHECK(error_of(p5).find("not uniformly sampled") != std::string::npos);
   const auto p6 = write("e6.csv", "time_s,angle,torque_nm\n");
-  CHECK(error_of(p6) == p6 + ":1: unknown column \"angle\" (expected time_s, pos_rad, torque_nm)");
+  CHECK(error_of(p6) == p6 + ":1: header must name pos_rad and torque_nm (columns: time_s, angle, torque_nm)");
   const auto p7 = write("e7.csv", "# dt=0.001\n0.1,nan\n");
   CHECK(error_of(p7) == p7 + ":2: field 2 is not a finite number (\"nan\")");
   CHECK(error_of(test::tmp_path("missing.csv")).find("cannot open") != std::string::npos);

@@ -168,6 +168,22 @@ struct Diagnosis {
   [[nodiscard]] const ParamEstimate* find_baseline(const std::string& name) const;
 };
 
+// One block of the cross-validation design: samples [begin, end) of segment
+// seg, held out with fold `fold`, resampled by the bootstrap as unit `unit`
+// (a trial: both axes of a planar trial share it).
+struct CvBlock {
+  std::size_t seg = 0, begin = 0, end = 0;
+  int fold = 0;
+  std::size_t unit = 0;
+};
+
+// The design every stage of a diagnosis scores on (docs/diagnosis.md,
+// "Pipeline" 3): folds of neighbouring trials, or of one continuous record
+// cut into opt.folds folds of opt.blocks_per_fold blocks with guard gaps,
+// after `history` samples. Throws manip::InputError when the data are too
+// short (the message says how long they must be).
+[[nodiscard]] std::vector<CvBlock> cv_blocks(const Dataset& d, const EngineOptions& opt, std::size_t history);
+
 // Throws manip::InputError (exit 4) when the data cannot support the
 // cross-validation (message says how much is needed).
 [[nodiscard]] Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism>>& library,

@@ -27,6 +27,10 @@ struct SingleJointRecord {
   double dt_s = 0.0;
   std::vector<double> pos_rad;
   std::vector<double> torque_nm;
+  // How the columns were chosen when not by the default two/three-column
+  // layout (a "channels=" comment or a header line with extra columns), e.g.
+  // "columns by name: position 'pos1' (1), torque 'tq1' (2); ignored 'emg' (3)".
+  std::string columns_note;
 };
 
 [[nodiscard]] SingleJointRecord read_single_joint_csv(const std::string& path);
