@@ -624,6 +624,8 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       }
       cs.test = stats::one_sided_t(cs.fold_gain);
       cs.setting = grid[best_all_s];
+      if (grid.size() > 1 && static_cast<std::size_t>(mech.main_param()) < cs.setting.size())
+        for (const auto s : best_fold_s) cs.fold_main.push_back(grid[s][static_cast<std::size_t>(mech.main_param())]);
       const auto sp = mech.shape_params();
       for (std::size_t i = 0; i < sp.size(); ++i)
         cs.params.push_back({sp[i].name, sp[i].unit, {cs.setting[i], cs.setting[i], cs.setting[i]}, sp[i].plausible_lo, sp[i].plausible_hi, true, true});

@@ -65,27 +65,35 @@ class StretchReflexImpl final : public Mechanism {
     return {{"gain_pos_vel", "N m s/rad", 0.0, 50.0}, {"gain_neg_vel", "N m s/rad", 0.0, 50.0}};
   }
   int main_param() const override { return 0; }
-  std::size_t delay_step(const Dataset& d) const {
-    return std::max<std::size_t>(1, static_cast<std::size_t>(std::lround(0.001 / d.dt_s)));
-  }
   std::vector<double> fns() const {
     std::vector<double> f(kFnCount);
     for (int i = 0; i < kFnCount; ++i)
       f[static_cast<std::size_t>(i)] = kFnLo_hz * std::pow(kFnHi_hz / kFnLo_hz, i / (kFnCount - 1.0));
     return f;
   }
-  std::vector<std::size_t> delays(const Dataset& d) const {
-    std::vector<std::size_t> out;
-    const auto lo = static_cast<std::size_t>(std::lround(kDelayLo_s / d.dt_s));
-    const auto hi = static_cast<std::size_t>(std::lround(kDelayHi_s / d.dt_s));
-    for (std::size_t k = lo; k <= hi; k += delay_step(d)) out.push_back(k);
+  // Delays on a 1 ms grid at any sampling rate: every round(1 ms / dt)-th
+  // whole sample when dt <= 1 ms, else fractional delays (linear
+  // interpolation between samples, below), so that a record sampled at
+  // 100 Hz - the rate such records are often analysed at - does not
+  // quantise the loop delay to 10 ms.
+  std::vector<double> delays(const Dataset& d) const {
+    std::vector<double> out;
+    if (d.dt_s <= 0.001) {
+      const auto step = std::max<std::size_t>(1, static_cast<std::size_t>(std::lround(0.001 / d.dt_s)));
+      const auto lo = static_cast<std::size_t>(std::lround(kDelayLo_s / d.dt_s));
+      const auto hi = static_cast<std::size_t>(std::lround(kDelayHi_s / d.dt_s));
+      for (std::size_t k = lo; k <= hi; k += step) out.push_back(static_cast<double>(k) * d.dt_s);
+    } else {
+      const auto n = static_cast<int>(std::lround((kDelayHi_s - kDelayLo_s) / 0.001));
+      for (int i = 0; i <= n; ++i) out.push_back(kDelayLo_s + 0.001 * i);
+    }
     return out;
   }
   std::vector<std::vector<double>> grid(const Dataset& d) const override {
     std::vector<std::vector<double>> g;
     for (double fn : fns())
       for (double z : kZetas)
-        for (std::size_t k : delays(d)) g.push_back({static_cast<double>(k) * d.dt_s, fn, z});
+        for (double t : delays(d)) g.push_back({t, fn, z});
     return g;
   }
   std::size_t history_samples(const Dataset& d) const override {
@@ -113,20 +121,28 @@ class StretchReflexImpl final : public Mechanism {
     y.resize(x.size());
     dsp::sosfilt(std::span<const dsp::Sos>(&sos, 1), x, y);
   }
-  static void shift(const std::vector<double>& x, std::size_t k, std::vector<double>& y) {
+  // y(t) = x(t - delay), zero before the delay; between samples linear.
+  static void shift(const std::vector<double>& x, double delay_s, double dt_s, std::vector<double>& y) {
     y.assign(x.size(), 0.0);
-    if (k < x.size()) std::copy(x.begin(), x.end() - static_cast<long>(k), y.begin() + static_cast<long>(k));
+    const double q = delay_s / dt_s;
+    if (std::fabs(q - std::round(q)) < 1e-6) {  // whole samples (every grid point when dt <= 1 ms)
+      const auto k = static_cast<std::size_t>(std::lround(q));
+      if (k < x.size()) std::copy(x.begin(), x.end() - static_cast<long>(k), y.begin() + static_cast<long>(k));
+      return;
+    }
+    const auto k = static_cast<std::size_t>(std::floor(q));
+    const double w = q - static_cast<double>(k);
+    for (std::size_t i = k + 1; i < x.size(); ++i) y[i] = (1.0 - w) * x[i - k] + w * x[i - k - 1];
   }
   Columns columns(const Dataset& d, std::span<const double> setting) const override {
     const auto rect = rectified(d);
-    const auto k = static_cast<std::size_t>(std::lround(setting[0] / d.dt_s));
     const auto c = reflex_lowpass_sos(setting[1], setting[2], d.dt_s);
     Columns out(d.segments.size(), std::vector<std::vector<double>>(2));
     std::vector<double> tmp;
     for (std::size_t s = 0; s < d.segments.size(); ++s)
       for (int dir = 0; dir < 2; ++dir) {
         lowpass(c, rect[s][static_cast<std::size_t>(dir)], tmp);
-        shift(tmp, k, out[s][static_cast<std::size_t>(dir)]);
+        shift(tmp, setting[0], d.dt_s, out[s][static_cast<std::size_t>(dir)]);
       }
     return out;
   }
@@ -141,9 +157,9 @@ class StretchReflexImpl final : public Mechanism {
         const auto c = reflex_lowpass_sos(fn, z, d.dt_s);
         for (std::size_t s = 0; s < d.segments.size(); ++s)
           for (std::size_t dir = 0; dir < 2; ++dir) lowpass(c, rect[s][dir], filt[s][dir]);
-        for (std::size_t k : ds) {
+        for (double t : ds) {
           for (std::size_t s = 0; s < d.segments.size(); ++s)
-            for (std::size_t dir = 0; dir < 2; ++dir) shift(filt[s][dir], k, cols[s][dir]);
+            for (std::size_t dir = 0; dir < 2; ++dir) shift(filt[s][dir], t, d.dt_s, cols[s][dir]);
           f(idx++, cols);
         }
       }

@@ -187,6 +187,7 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
         jc["not_applicable"] = c.not_applicable;
       } else {
         jc["fold_gain"] = c.fold_gain;
+        if (!c.fold_main.empty()) jc["fold_main_param"] = c.fold_main;
         jc["mean_gain"] = c.test.mean;
         jc["se"] = c.test.se;
         jc["t"] = c.test.t;

@@ -132,6 +132,49 @@ TEST_CASE("baseline least squares recovers I, B, K, c of a noise-free record exa
   CHECK(prep.cutoff_hz == Approx(40.0).margin(1.0));
 }
 
+TEST_CASE("reflex column at 100 Hz: a delay between samples (43 ms) against the analytic steady state, whole samples would be 3 ms off", "[diagnosis][mechanisms]") {
+  // Velocity 1 + 0.5 sin(w t) > 0: the stretch direction's rectifier passes
+  // it unchanged, and the column in steady state is
+  //   H(0) + 0.5 |H(w)| sin(w (t - delay) + arg H(w)),
+  // H the reflex low pass evaluated on the unit circle from its coefficients.
+  const double dt = 0.01, f = 2.0, w = 2.0 * std::numbers::pi * f, fn = 5.0, zeta = 0.75, delay = 0.043;
+  SingleJointRecord rec;
+  rec.dt_s = dt;
+  for (int i = 0; i < 3000; ++i) {
+    const double t = i * dt;
+    rec.pos_rad.push_back(t + 0.5 / w * (1.0 - std::cos(w * t)));
+    rec.torque_nm.push_back(0.0);
+  }
+  SingleJointOptions so;
+  so.torque_sign = 1;
+  const auto prep = prepare_single_joint(rec, so);
+  const auto lib = standard_library();
+  const Mechanism* reflex = nullptr;
+  for (const auto& m : lib)
+    if (m->id() == "stretch_reflex") reflex = m.get();
+  REQUIRE(reflex);
+  const auto c = reflex_lowpass_sos(fn, zeta, dt);
+  const std::complex<double> zi = std::exp(std::complex<double>(0, -w * dt));
+  const auto H = (c[0] + c[1] * zi + c[2] * zi * zi) / (c[3] + c[4] * zi + c[5] * zi * zi);
+  const double H0 = (c[0] + c[1] + c[2]) / (c[3] + c[4] + c[5]);
+  auto worst = [&](double d_s) {
+    const std::vector<double> setting{d_s, fn, zeta};
+    const auto cols = reflex->columns(prep.data, setting);
+    const auto& g = prep.data.segments.front();
+    double e = 0.0;
+    for (std::size_t i = g.first + 500; i < g.last; ++i) {  // after 5 s: the low pass's transient is gone
+      const double t = g.t0_s + static_cast<double>(i) * dt;
+      const double ref = H0 + 0.5 * std::abs(H) * std::sin(w * (t - delay) + std::arg(H));
+      e = std::max(e, std::fabs(cols.front()[0][i] - ref));
+    }
+    return e;
+  };
+  // Linear interpolation's error bound, (w dt)^2 / 8 of the 0.5 |H| amplitude, plus the smoother's gain at 2 Hz.
+  CHECK(worst(delay) < 2e-3);
+  CHECK(worst(0.040) > 1e-2);
+  CHECK(worst(0.050) > 1e-2);
+}
+
 TEST_CASE("reflex low pass: unit DC gain and |H(fn)| = 1 / (2 zeta) (prewarped bilinear)", "[diagnosis][mechanisms]") {
   for (double fn : {1.0, 4.0, 20.0})
     for (double z : {0.5, 0.75, 1.0}) {

@@ -91,6 +91,9 @@ struct CandidateScore {
   bool implausible = false;  // significant or not: a parameter outside its plausible range (require_plausible)
   std::vector<ParamEstimate> params;  // fitted on all data (no interval)
   std::vector<double> setting;        // chosen shape parameters on all data
+  // The main shape parameter chosen on each fold's training blocks (empty
+  // without a shape grid): how firmly the data place it.
+  std::vector<double> fold_main;
   // Detection limit of this session for this mechanism (docs/diagnosis.md,
   // "Detection limits"), one entry per gain at the chosen shape: the
   // cluster-robust standard error of the gain (clusters = the bootstrap
