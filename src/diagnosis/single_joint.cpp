@@ -210,10 +210,10 @@ SingleJointRecord read_single_joint_csv(const std::string& path) {
     auto col = [&](int i) { return "'" + names[static_cast<std::size_t>(i)] + "' (" + std::to_string(i + 1) + ")"; };
     rec.columns_note = "columns by name: position " + col(col_p) + ", torque " + col(col_q);
     if (col_t >= 0) rec.columns_note += ", time " + col(col_t);
-    std::string ignored;
+    std::vector<std::string> ignored;
     for (int i = 0; i < ncols; ++i)
-      if (i != col_t && i != col_p && i != col_q) ignored += (ignored.empty() ? "" : ", ") + col(i);
-    if (!ignored.empty()) rec.columns_note += "; ignored " + ignored;
+      if (i != col_t && i != col_p && i != col_q) ignored.push_back(col(i));
+    if (!ignored.empty()) rec.columns_note += "; ignored " + name_list(ignored);
   }
   if (rec.pos_rad.size() < 2) throw InputError(path + ": no data rows (need position and torque samples)");
   if (col_t >= 0) {
