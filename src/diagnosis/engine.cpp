@@ -14,6 +14,12 @@
 
 namespace manip::diagnosis {
 
+namespace {
+// require_physical: a wrong-sign gain beyond its interval that exceeds this
+// fraction of the mechanism's largest right-sign gain makes it unphysical.
+constexpr double kWrongSignFraction = 0.25;
+}  // namespace
+
 const ParamEstimate* Diagnosis::find_final(const std::string& name) const {
   for (const auto& p : final_params)
     if (p.name == name) return &p;
@@ -692,6 +698,29 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
           some_gain = some_gain || !q.has_bounds || ((q.plausible_lo < 0.0 || q.est.value >= 0.0) && (q.plausible_hi > 0.0 || q.est.value <= 0.0));
         }
         if (!some_gain && c.params.size() > n_shape) c.implausible = true;
+        // Nor may a gain have the wrong sign beyond its uncertainty (its
+        // 95 % Wald interval, cluster-robust SE, entirely on the wrong side)
+        // while being more than a quarter of the largest right-sign gain of
+        // the same mechanism: a "reflex" that clearly assists stretch in one
+        // direction about as much as it resists it in the other is a
+        // direction-blind term, not a stretch reflex. A true reflex's
+        // unstretched gain leaks a little below 0 when its low pass is off
+        // the grid: at most 0.16 of the stretched gain in 59 named
+        // synthetic reflexes (docs/diagnosis.md, "Detection study").
+        double right = 0.0;
+        for (std::size_t g = n_shape; g < c.params.size(); ++g) {
+          const auto& q = c.params[g];
+          if (q.has_bounds && ((q.plausible_lo >= 0.0 && q.est.value > 0.0) || (q.plausible_hi <= 0.0 && q.est.value < 0.0)))
+            right = std::max(right, std::fabs(q.est.value));
+        }
+        for (std::size_t g = n_shape; g < c.params.size(); ++g) {
+          const auto k = g - n_shape;
+          const auto& q = c.params[g];
+          if (!q.has_bounds || k >= c.gain_se.size()) continue;
+          const double half = 1.96 * c.gain_se[k];
+          const bool wrong = (q.plausible_lo >= 0.0 && q.est.value + half < 0.0) || (q.plausible_hi <= 0.0 && q.est.value - half > 0.0);
+          if (wrong && std::fabs(q.est.value) > kWrongSignFraction * right) c.implausible = true;
+        }
       }
       const double score = opt.rank_by_t ? c.test.t : c.test.mean;
       if (c.significant && !c.implausible && (winner < 0 || score > best_gain)) {
@@ -871,8 +900,11 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
   for (Eigen::Index i = 0; i < p0; ++i)
     out.final_params.push_back({d.base_names[static_cast<std::size_t>(i)], d.base_units[static_cast<std::size_t>(i)], column_interval(i), 0, 0, false});
   Eigen::Index col = p0;
+  // Column of each accepted mechanism's gains (for Mechanism::base_sum).
+  std::vector<Eigen::Index> gain_col(accepted_idx.size(), -1);
   for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
     if (static_cast<int>(a) == gridded) continue;
+    gain_col[a] = col;
     // Shape of a mechanism other than the re-searched one: kept at its full-data value (no interval).
     const auto sp = lib[accepted_idx[a]]->shape_params();
     for (std::size_t i = 0; i < sp.size(); ++i) {
@@ -886,6 +918,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
   }
   if (gridded >= 0) {
     const auto& mech = *lib[accepted_idx[static_cast<std::size_t>(gridded)]];
+    gain_col[static_cast<std::size_t>(gridded)] = col;
     const auto sp = mech.shape_params();
     for (std::size_t i = 0; i < sp.size(); ++i) {
       std::vector<double> b;
@@ -896,6 +929,19 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       out.final_params.push_back({g.name, g.unit, column_interval(col), g.plausible_lo, g.plausible_hi, true});
       ++col;
     }
+  }
+  for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
+    const auto bsum = lib[accepted_idx[a]]->base_sum();
+    if (bsum.base.empty()) continue;
+    const auto gs = lib[accepted_idx[a]]->gains();
+    const auto bi = std::find(d.base_names.begin(), d.base_names.end(), bsum.base);
+    const auto gi = std::find_if(gs.begin(), gs.end(), [&](const ParamInfo& g) { return g.name == bsum.gain; });
+    if (bi == d.base_names.end() || gi == gs.end()) continue;
+    const auto ib = static_cast<Eigen::Index>(bi - d.base_names.begin());
+    const auto ig = gain_col[a] + static_cast<Eigen::Index>(gi - gs.begin());
+    std::vector<double> b;
+    for (const auto& t : th_boot) b.push_back(t(ib) + t(ig));
+    out.derived_params.push_back({{bsum.name, d.base_units[static_cast<std::size_t>(ib)], to_interval(th_full(ib) + th_full(ig), b), 0, 0, false}, bsum.base, bsum.meaning});
   }
   // What remains: signatures of the final model's residual.
   {

@@ -200,6 +200,71 @@ class QuadraticStiffnessImpl final : public Mechanism {
   }
 };
 
+// Stiffness that relaxes: the elastic torque of a held position decays over
+// tau towards a lower static value (a standard linear solid: K for slow
+// motion, K + dK for motion faster than tau). Two physical routes give this
+// form and the record cannot tell them apart: stress relaxation of active
+// muscle and tendon (time constants of 0.1 s to several seconds: e.g. Rack &
+// Westbury 1974 for the loss of short-range stiffness, Fung's quasi-linear
+// viscoelasticity for tissue), and a participant who holds a tonic torque
+// (often against a torque display) correcting slow torque changes
+// voluntarily, which removes the slow part of the elastic torque (voluntary
+// reaction times >= 150 ms set the lower end). The column is
+// dK (x_c - LP_tau[x_c]) = dK HP_tau[x_c], x_c = x - x_ref: a high pass of
+// the position, so a constant or a ramp of the torque (offset, drift) is not
+// in it, and for tau -> infinity it becomes dK x_c (K itself).
+class StiffnessRelaxationImpl final : public Mechanism {
+ public:
+  std::string id() const override { return "stiffness_relaxation"; }
+  std::string title() const override {
+    return "stiffness that relaxes over tau (stress relaxation, or slow voluntary torque regulation): dK HP_tau[x - x_ref]";
+  }
+  std::string signature() const override {
+    return "residual follows the position's deviation from its running mean over tau: the static stiffness is below the stiffness to fast motion";
+  }
+  std::vector<ParamInfo> shape_params() const override { return {{"tau_relax", "s", kTauLo_s, kTauHi_s}}; }
+  std::vector<std::vector<double>> grid(const Dataset&) const override {
+    std::vector<std::vector<double>> g;
+    for (int i = 0; i < kTauCount; ++i) g.push_back({kTauLo_s * std::pow(kTauHi_s / kTauLo_s, i / (kTauCount - 1.0))});
+    return g;
+  }
+  std::vector<ParamInfo> gains() const override {
+    // dK > 0: the stiffness to fast motion exceeds the static one (a
+    // relaxation; a dK < 0 would be a stiffness that grows while the
+    // position is held). The size bound is the range of ankle K itself
+    // (10-500 N m/rad with contraction: Kearney et al. 1997, Mirbagheri et al. 2000).
+    return {{"dK", "N m/rad", 0.0, 500.0}};
+  }
+  int main_param() const override { return 0; }
+  BaseSum base_sum() const override {
+    return {"K", "dK", "K_fast", "K + dK: the stiffness to motion faster than tau_relax (K is then the static stiffness)"};
+  }
+  Columns columns(const Dataset& d, std::span<const double> setting) const override {
+    // Exact first-order recursion of the low pass; started at the first
+    // sample's position (at rest there: no start-up transient in the column).
+    const double a = std::exp(-d.dt_s / setting[0]);
+    Columns out(d.segments.size(), std::vector<std::vector<double>>(1));
+    for (std::size_t s = 0; s < d.segments.size(); ++s) {
+      const auto& x = d.segments[s].pos;  // already smoothed like the target
+      auto& c = out[s][0];
+      c.resize(x.size());
+      double lp = x.empty() ? 0.0 : x.front() - d.pos_ref;
+      for (std::size_t i = 0; i < x.size(); ++i) {
+        const double xc = x[i] - d.pos_ref;
+        lp = a * lp + (1.0 - a) * xc;
+        c[i] = xc - lp;
+      }
+    }
+    return out;
+  }
+
+ private:
+  // 0.1-10 s, 41 points (ratio 1.12): above the reflex's low pass, below a
+  // record's length; a tau on the edge is refused as outside this range.
+  static constexpr double kTauLo_s = 0.1, kTauHi_s = 10.0;
+  static constexpr int kTauCount = 41;
+};
+
 class OffsetDriftImpl final : public Mechanism {
  public:
   std::string id() const override { return "offset_drift"; }
@@ -275,6 +340,7 @@ std::vector<std::unique_ptr<Mechanism>> standard_library() {
   std::vector<std::unique_ptr<Mechanism>> lib;
   lib.push_back(std::make_unique<StretchReflexImpl>());
   lib.push_back(std::make_unique<QuadraticStiffnessImpl>());
+  lib.push_back(std::make_unique<StiffnessRelaxationImpl>());
   lib.push_back(std::make_unique<OffsetDriftImpl>());
   lib.push_back(std::make_unique<CoulombFrictionImpl>());
   lib.push_back(std::make_unique<WrongInertiaImpl>());

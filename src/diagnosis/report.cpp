@@ -153,6 +153,14 @@ std::string text_report(const Diagnosis& d, const ReportContext& ctx) {
         o << "    " << n << ": " << interval(b->est) << " -> " << interval(f->est) << " " << b->unit << " ("
           << fmt("%+.1f", 100.0 * (f->est.value - b->est.value) / std::fabs(b->est.value)) << " %)\n";
     }
+    for (const auto& dp : d.derived_params) {
+      const auto* b = d.find_baseline(dp.base);
+      o << "    " << dp.param.name << " = " << dp.meaning << ":\n      ";
+      if (b) o << interval(b->est) << " (baseline " << b->name << ") -> ";
+      o << interval(dp.param.est) << " " << dp.param.unit;
+      if (b) o << " (" << fmt("%+.1f", 100.0 * (dp.param.est.value - b->est.value) / std::fabs(b->est.value)) << " %)";
+      o << "\n";
+    }
     o << "\nWhat remains (residual of the extended model):\n";
     sig_text(o, d.after);
   }
@@ -220,6 +228,13 @@ nlohmann::json json_report(const Diagnosis& d, const ReportContext& ctx) {
   j["final"]["contribution_rms"] = d.contribution_rms;
   j["final"]["params"] = nlohmann::json::array();
   for (const auto& p : d.final_params) j["final"]["params"].push_back(param_json(p));
+  j["final"]["derived"] = nlohmann::json::array();
+  for (const auto& dp : d.derived_params) {
+    auto e = param_json(dp.param);
+    e["base"] = dp.base;
+    e["meaning"] = dp.meaning;
+    j["final"]["derived"].push_back(e);
+  }
   j["seconds"] = d.seconds;
   return j;
 }

@@ -22,6 +22,7 @@ const char* name(Hidden h) {
     case Hidden::offset_drift: return "offset_drift";
     case Hidden::friction: return "coulomb_friction";
     case Hidden::torque_lag: return "torque_lag";
+    case Hidden::relaxation: return "stiffness_relaxation";
   }
   return "?";
 }
@@ -33,6 +34,7 @@ const char* main_param_name(Hidden h) {
     case Hidden::offset_drift: return "drift_rate";
     case Hidden::friction: return "Fc";
     case Hidden::torque_lag: return "lag";
+    case Hidden::relaxation: return "tau_relax";
     case Hidden::none: break;
   }
   return "";
@@ -45,6 +47,7 @@ double Truth::main_param(Hidden h) const {
     case Hidden::offset_drift: return drift_rate;
     case Hidden::friction: return Fc;
     case Hidden::torque_lag: return lag_s;
+    case Hidden::relaxation: return tau_relax_s;
     case Hidden::none: break;
   }
   return 0.0;
@@ -154,8 +157,20 @@ Generated generate(const Options& opt) {
       case Hidden::quadratic_stiffness: hid[i] = (pos[i] - xm) * (pos[i] - xm); break;
       case Hidden::offset_drift: hid[i] = time[i] - T / 2; break;
       case Hidden::friction: hid[i] = std::tanh(vel[i] / t.v_s); break;
+      case Hidden::relaxation: break;  // below: a filter over the whole record
       case Hidden::torque_lag:
       case Hidden::none: break;
+    }
+  }
+  if (opt.hidden == Hidden::relaxation) {
+    // The true position (not the engine's smoothed one) through the
+    // continuous first-order low pass, exact for an input linear between
+    // samples; the term is what the low pass has not caught up with.
+    t.tau_relax_s = 0.3 * std::pow(10.0, rng.uniform());  // 0.3-3 s
+    double lp = pos[0] - xm;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (i > 0) lp = first_order_lag_step(lp, pos[i - 1] - xm, pos[i] - xm, t.tau_relax_s, dt);
+      hid[i] = pos[i] - xm - lp;
     }
   }
   if (opt.hidden == Hidden::torque_lag) {
@@ -192,6 +207,7 @@ Generated generate(const Options& opt) {
       case Hidden::quadratic_stiffness: t.K2 = scale; break;
       case Hidden::offset_drift: t.drift_rate = scale; break;
       case Hidden::friction: t.Fc = scale; break;
+      case Hidden::relaxation: t.dK = scale; break;
       case Hidden::torque_lag:
       case Hidden::none: break;
     }

@@ -138,20 +138,9 @@ TEST_CASE("reflex column at 100 Hz: a delay between samples (43 ms) against the 
   //   H(0) + 0.5 |H(w)| sin(w (t - delay) + arg H(w)),
   // H the reflex low pass evaluated on the unit circle from its coefficients.
   const double dt = 0.01, f = 2.0, w = 2.0 * std::numbers::pi * f, fn = 5.0, zeta = 0.75, delay = 0.043;
-  SingleJointRecord rec;
-  rec.dt_s = dt;
-  for (int i = 0; i < 3000; ++i) {
-    const double t = i * dt;
-    rec.pos_rad.push_back(t + 0.5 / w * (1.0 - std::cos(w * t)));
-    rec.torque_nm.push_back(0.0);
-  }
-  SingleJointOptions so;
-  so.torque_sign = 1;
-  const auto prep = prepare_single_joint(rec, so);
+  const auto prep = test::prepared_position(dt, 3000, [&](double t) { return t + 0.5 / w * (1.0 - std::cos(w * t)); });
   const auto lib = standard_library();
-  const Mechanism* reflex = nullptr;
-  for (const auto& m : lib)
-    if (m->id() == "stretch_reflex") reflex = m.get();
+  const Mechanism* reflex = test::mechanism_by_id(lib, "stretch_reflex");
   REQUIRE(reflex);
   const auto c = reflex_lowpass_sos(fn, zeta, dt);
   const std::complex<double> zi = std::exp(std::complex<double>(0, -w * dt));
@@ -173,6 +162,32 @@ TEST_CASE("reflex column at 100 Hz: a delay between samples (43 ms) against the 
   CHECK(worst(delay) < 2e-3);
   CHECK(worst(0.040) > 1e-2);
   CHECK(worst(0.050) > 1e-2);
+}
+
+TEST_CASE("stiffness relaxation column: a sinusoid through tau s / (1 + tau s) against the continuous steady state", "[diagnosis][mechanisms]") {
+  // x = A sin(w t) about x_ref: the column x_c - LP_tau[x_c] is, in steady
+  // state, A |G| sin(w t + arg G) with G = j w tau / (1 + j w tau). The
+  // recursion's discretisation error is O(dt / tau); its transient from the
+  // start (the low pass starts at the first sample) has decayed after 10 tau.
+  const double dt = 0.001, A = 0.02, f = 0.3, w = 2.0 * std::numbers::pi * f;
+  const auto prep = test::prepared_position(dt, 40000, [&](double t) { return A * std::sin(w * t); });
+  const auto lib = standard_library();
+  const Mechanism* relax = test::mechanism_by_id(lib, "stiffness_relaxation");
+  REQUIRE(relax);
+  for (const double tau : {0.2, 1.0, 2.0}) {
+    const std::vector<double> setting{tau};
+    const auto cols = relax->columns(prep.data, setting);
+    const auto& g = prep.data.segments.front();
+    const std::complex<double> G = std::complex<double>(0, w * tau) / (1.0 + std::complex<double>(0, w * tau));
+    double e = 0.0;
+    for (std::size_t i = static_cast<std::size_t>(10.0 * tau / dt); i < g.last; ++i) {
+      const double t = static_cast<double>(i) * dt;
+      const double ref = A * std::abs(G) * std::sin(w * t + std::arg(G));
+      e = std::max(e, std::fabs(cols.front()[0][i] - ref));
+    }
+    INFO("tau " << tau << " worst " << e << " of amplitude " << A * std::abs(G));
+    CHECK(e < 0.01 * A * std::abs(G) + 1e-6);
+  }
 }
 
 TEST_CASE("reflex low pass: unit DC gain and |H(fn)| = 1 / (2 zeta) (prewarped bilinear)", "[diagnosis][mechanisms]") {

@@ -42,6 +42,11 @@ struct EngineOptions {
   // are guesses: K2) and the other gains and shapes may sit outside (a true
   // reflex's unstretched direction is often a little below 0, its damping at
   // the grid's 1.0). Measured: docs/diagnosis.md, "Torque-channel lag".
+  // Since 2026-12-06 also refused: a candidate with a gain of the wrong
+  // sign beyond its 95 % Wald interval (cluster-robust SE) that exceeds a
+  // quarter of its largest right-sign gain (a "reflex" that pushes the same
+  // way for motion in either direction is direction-blind, not a reflex;
+  // true reflexes leaked at most 0.16 in the study: docs/diagnosis.md).
   bool require_physical = true;
   // Among the significant candidates accept the one with the largest t
   // statistic of the fold gains (most consistent held-out improvement) instead
@@ -158,6 +163,15 @@ struct Diagnosis {
   std::vector<std::string> accepted;        // mechanism ids, in the order added
   std::vector<std::vector<double>> accepted_settings;
   std::vector<ParamEstimate> final_params;  // base then each accepted mechanism's shape params and gains
+  // Sums of a baseline parameter and an accepted gain that mean something
+  // physical (Mechanism::base_sum: K + dK of a relaxing stiffness), with
+  // their block-bootstrap intervals; meaning says what.
+  struct Derived {
+    ParamEstimate param;
+    std::string base;  // the baseline parameter it adds to
+    std::string meaning;
+  };
+  std::vector<Derived> derived_params;
   HeldOut final_heldout;
   Interval heldout_gain;                    // 1 - SSE_after / SSE_before over held-out folds
   // RMS (about its mean) of each accepted mechanism's term in the extended

@@ -93,6 +93,14 @@ class Mechanism {
     double (*from_gain)(double) = nullptr;
   };
   [[nodiscard]] virtual DerivedGain derived_gain() const { return {}; }
+  // A gain that adds to a baseline parameter for some motion (the relaxing
+  // stiffness: K + dK is the stiffness to motion faster than tau_relax). The
+  // engine reports the sum with its bootstrap interval
+  // (Diagnosis::derived_params). Empty base: none.
+  struct BaseSum {
+    std::string base, gain, name, meaning;
+  };
+  [[nodiscard]] virtual BaseSum base_sum() const { return {}; }
 };
 
 // Stretch reflex (Hammerstein: Kearney, Stein & Parameswaran 1997): half-wave
@@ -100,6 +108,7 @@ class Mechanism {
 // (natural frequency fn, damping zeta); one gain per stretch direction.
 // Columns: LP[max(v(t - tau), 0)], LP[min(v(t - tau), 0)].
 // Position-dependent (quadratic) stiffness: (x - x_ref)^2.
+// Stiffness relaxation: x_c - LP_tau[x_c], x_c = x - x_ref (first-order low pass).
 // Sensor offset drift: t - t_mid.
 // Coulomb-like friction: sign(v).
 // Inertia different from the configured one (only when the baseline fixes it): acceleration.

@@ -12,9 +12,9 @@
 
 namespace manip::diagnosis::synthetic {
 
-enum class Hidden { none, reflex, quadratic_stiffness, offset_drift, friction, torque_lag };
+enum class Hidden { none, reflex, quadratic_stiffness, offset_drift, friction, torque_lag, relaxation };
 [[nodiscard]] const char* name(Hidden h);          // "none", "stretch_reflex", ... (the engine's ids)
-[[nodiscard]] const char* main_param_name(Hidden h);  // "delay", "K2", "drift_rate", "Fc", "lag"
+[[nodiscard]] const char* main_param_name(Hidden h);  // "delay", "K2", "drift_rate", "Fc", "lag", "tau_relax"
 
 struct Options {
   Hidden hidden = Hidden::none;
@@ -40,6 +40,8 @@ struct Truth {
   // torque_lag: the recorded torque is the joint torque through 1 / (1 + lag s)
   // (exact first-order-hold discretisation of the continuous lag).
   double lag_s = 0;
+  // relaxation: dK (x_c - LP[x_c]), LP = 1 / (1 + tau_relax s), x_c about the mean position
+  double tau_relax_s = 0, dK = 0;
   double noise_white_nm = 0, noise_coloured_nm = 0;
   [[nodiscard]] double main_param(Hidden h) const;
 };
