@@ -840,8 +840,11 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
                                      to_interval(th0(i), boot[static_cast<std::size_t>(i)]), 0, 0, false});
   }
   // The first accepted mechanism with a shape grid has its shape re-searched
-  // in every replicate (its cross statistics against all other columns);
-  // the others keep their shape.
+  // in every replicate (its cross statistics against all other columns); the
+  // gains' intervals come from these replicates, with the other mechanisms
+  // at their named shapes. Each later gridded mechanism gets its shape's
+  // interval from a search of its own in the same replicates, the others
+  // (the first gridded one included) at their named shapes (below).
   int gridded = -1;
   for (std::size_t a = 0; a < accepted_idx.size(); ++a)
     if (lib[accepted_idx[a]]->grid(d).size() > 1) {
@@ -862,26 +865,32 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     grid_stats.resize(grid_set.size());
     mech.for_each_setting(d, [&](std::size_t s, const Columns& cols) { grid_stats[s] = cand_stats(d, fixed, blocks, cols); });
   }
-  auto fit_weighted = [&](const std::vector<double>& w, std::vector<double>& shape) {
-    const Stats s = weighted(bs_fixed, w, pf);
-    if (gridded < 0) return VectorXd(solve(s.G, s.h));
+  // The grid point of least weighted SSE against the fixed columns' weighted
+  // statistics s (p_fixed parameters), and its solution.
+  auto grid_search = [&](const Stats& s, Eigen::Index p_fixed, const std::vector<std::vector<CandStats>>& gstats, const std::vector<double>& w) {
     double best = std::numeric_limits<double>::infinity();
-    VectorXd bt;
-    for (std::size_t g = 0; g < grid_set.size(); ++g) {
+    std::pair<std::size_t, VectorXd> found{0, VectorXd()};
+    for (std::size_t g = 0; g < gstats.size(); ++g) {
       CandStats c;
-      c.zero(grid_stats[g].front().D.rows(), pf);
+      c.zero(gstats[g].front().D.rows(), p_fixed);
       for (std::size_t b = 0; b < blocks.size(); ++b)
-        if (w[b] > 0) c.add(grid_stats[g][b], w[b]);
+        if (w[b] > 0) c.add(gstats[g][b], w[b]);
       const Stats a = augment(s, c);
-      const VectorXd th = solve(a.G, a.h);
+      VectorXd th = solve(a.G, a.h);
       const double e = sse_of(a, th);
       if (e < best) {
         best = e;
-        bt = th;
-        shape = grid_set[g];
+        found = {g, std::move(th)};
       }
     }
-    return bt;
+    return found;
+  };
+  auto fit_weighted = [&](const std::vector<double>& w, std::vector<double>& shape) {
+    const Stats s = weighted(bs_fixed, w, pf);
+    if (gridded < 0) return VectorXd(solve(s.G, s.h));
+    auto [g, th] = grid_search(s, pf, grid_stats, w);
+    shape = grid_set[g];
+    return th;
   };
   std::vector<double> ones(blocks.size(), 1.0), shape_full;
   const VectorXd th_full = fit_weighted(ones, shape_full);
@@ -899,17 +908,45 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
   };
   for (Eigen::Index i = 0; i < p0; ++i)
     out.final_params.push_back({d.base_names[static_cast<std::size_t>(i)], d.base_units[static_cast<std::size_t>(i)], column_interval(i), 0, 0, false});
+  // Shape of each later gridded mechanism: its full-data optimum and, per
+  // replicate, its best grid point, with every other accepted mechanism fixed.
+  std::map<std::size_t, std::pair<std::vector<double>, std::vector<std::vector<double>>>> later_shape;
+  for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
+    const auto& mech = *lib[accepted_idx[a]];
+    if (static_cast<int>(a) == gridded || mech.grid(d).size() <= 1) continue;
+    say("block bootstrap of the " + mech.id() + " shape");
+    Model others;
+    for (std::size_t o = 0; o < accepted_idx.size(); ++o)
+      if (o != a) others.extras.push_back(&accepted_cols[o]);
+    const Eigen::Index po = others.p(d);
+    const auto bs_o = block_stats(d, others, blocks);
+    const auto gset = mech.grid(d);
+    std::vector<std::vector<CandStats>> gstats(gset.size());
+    mech.for_each_setting(d, [&](std::size_t g, const Columns& cols) { gstats[g] = cand_stats(d, others, blocks, cols); });
+    auto best_shape = [&](const std::vector<double>& w) { return gset[grid_search(weighted(bs_o, w, po), po, gstats, w).first]; };
+    auto& ls = later_shape[a];
+    ls.first = best_shape(ones);
+    for (const auto& w : W) ls.second.push_back(best_shape(w));
+  }
   Eigen::Index col = p0;
   // Column of each accepted mechanism's gains (for Mechanism::base_sum).
   std::vector<Eigen::Index> gain_col(accepted_idx.size(), -1);
   for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
     if (static_cast<int>(a) == gridded) continue;
     gain_col[a] = col;
-    // Shape of a mechanism other than the re-searched one: kept at its full-data value (no interval).
     const auto sp = lib[accepted_idx[a]]->shape_params();
+    const auto ls = later_shape.find(a);
     for (std::size_t i = 0; i < sp.size(); ++i) {
-      const double v = out.accepted_settings[a][i];
-      out.final_params.push_back({sp[i].name, sp[i].unit, {v, v, v}, sp[i].plausible_lo, sp[i].plausible_hi, true, true});
+      Interval iv;
+      if (ls != later_shape.end()) {
+        std::vector<double> b;
+        for (const auto& r : ls->second.second) b.push_back(r[i]);
+        iv = to_interval(ls->second.first[i], b);
+      } else {
+        const double v = out.accepted_settings[a][i];
+        iv = {v, v, v};
+      }
+      out.final_params.push_back({sp[i].name, sp[i].unit, iv, sp[i].plausible_lo, sp[i].plausible_hi, true, true});
     }
     for (const auto& g : lib[accepted_idx[a]]->gains()) {
       out.final_params.push_back({g.name, g.unit, column_interval(col), g.plausible_lo, g.plausible_hi, true});

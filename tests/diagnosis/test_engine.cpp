@@ -180,6 +180,47 @@ TEST_CASE("a reflex term with a wrong-sign gain beyond its interval and above a 
   }
 }
 
+// Two mechanisms with shape grids: the second one's shape gets its interval
+// from its own search in the bootstrap replicates (the first one's from the
+// replicates that also give the gains), both containing the truth.
+TEST_CASE("a relaxation and a reflex in one record - both named, each shape with a bootstrap interval around the truth", "[diagnosis][engine]") {
+  synthetic::Options o;
+  o.hidden = synthetic::Hidden::relaxation;
+  o.magnitude = 0.8;
+  o.seed = 2000;
+  const auto g = synthetic::generate(o);
+  auto prep = prepare_single_joint(g.record);
+  const auto lib = standard_library();
+  const Mechanism* reflex = test::mechanism_by_id(lib, "stretch_reflex");
+  REQUIRE(reflex);
+  const double fn = std::pow(25.0, 4.0 / 11.0);  // a point of the f_n grid
+  const std::vector<double> setting{0.045, fn, 0.75};
+  const auto cols = reflex->columns(prep.data, setting);
+  auto& seg = prep.data.segments.front();
+  for (std::size_t i = 0; i < seg.y.size(); ++i) seg.y[i] += 10.0 * cols.front()[0][i];
+  EngineOptions eo;
+  eo.bootstrap = 50;
+  const auto d = diagnose(prep.data, lib, eo);
+  REQUIRE(d.accepted.size() >= 2);
+  CHECK(std::find(d.accepted.begin(), d.accepted.end(), "stretch_reflex") != d.accepted.end());
+  CHECK(std::find(d.accepted.begin(), d.accepted.end(), "stiffness_relaxation") != d.accepted.end());
+  const auto* delay = d.find_final("delay");
+  const auto* tau = d.find_final("tau_relax");
+  REQUIRE(delay);
+  REQUIRE(tau);
+  INFO("delay " << delay->est.value << " [" << delay->est.lo << ", " << delay->est.hi << "], tau " << tau->est.value << " [" << tau->est.lo
+                << ", " << tau->est.hi << "] truth " << g.truth.tau_relax_s);
+  for (const auto* q : {delay, tau}) {
+    CHECK(q->est.lo < q->est.hi);  // re-searched, not a fixed value
+    CHECK(q->est.lo <= q->est.value);
+    CHECK(q->est.value <= q->est.hi);
+  }
+  CHECK(delay->est.lo <= 0.045);
+  CHECK(0.045 <= delay->est.hi);
+  CHECK(tau->est.lo <= g.truth.tau_relax_s);
+  CHECK(g.truth.tau_relax_s <= tau->est.hi);
+}
+
 TEST_CASE("a wrong configured inertia is named when the baseline fixes it", "[diagnosis][engine]") {
   synthetic::Options o;
   o.seed = 31;
