@@ -908,25 +908,29 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
   };
   for (Eigen::Index i = 0; i < p0; ++i)
     out.final_params.push_back({d.base_names[static_cast<std::size_t>(i)], d.base_units[static_cast<std::size_t>(i)], column_interval(i), 0, 0, false});
-  // Shape of each later gridded mechanism: its full-data optimum and, per
-  // replicate, its best grid point, with every other accepted mechanism fixed.
-  std::map<std::size_t, std::pair<std::vector<double>, std::vector<std::vector<double>>>> later_shape;
+  // Shape of each later gridded mechanism: its full-data optimum with the
+  // replicates' percentiles, every other accepted mechanism fixed.
+  std::map<std::size_t, std::vector<Interval>> later_shape;
   for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
     const auto& mech = *lib[accepted_idx[a]];
-    if (static_cast<int>(a) == gridded || mech.grid(d).size() <= 1) continue;
+    const auto gset = mech.grid(d);
+    if (static_cast<int>(a) == gridded || gset.size() <= 1) continue;
     say("block bootstrap of the " + mech.id() + " shape");
     Model others;
     for (std::size_t o = 0; o < accepted_idx.size(); ++o)
       if (o != a) others.extras.push_back(&accepted_cols[o]);
     const Eigen::Index po = others.p(d);
     const auto bs_o = block_stats(d, others, blocks);
-    const auto gset = mech.grid(d);
     std::vector<std::vector<CandStats>> gstats(gset.size());
     mech.for_each_setting(d, [&](std::size_t g, const Columns& cols) { gstats[g] = cand_stats(d, others, blocks, cols); });
     auto best_shape = [&](const std::vector<double>& w) { return gset[grid_search(weighted(bs_o, w, po), po, gstats, w).first]; };
-    auto& ls = later_shape[a];
-    ls.first = best_shape(ones);
-    for (const auto& w : W) ls.second.push_back(best_shape(w));
+    const auto full = best_shape(ones);
+    std::vector<std::vector<double>> boot(full.size());
+    for (const auto& w : W) {
+      const auto sh = best_shape(w);
+      for (std::size_t i = 0; i < sh.size(); ++i) boot[i].push_back(sh[i]);
+    }
+    for (std::size_t i = 0; i < full.size(); ++i) later_shape[a].push_back(to_interval(full[i], boot[i]));
   }
   Eigen::Index col = p0;
   // Column of each accepted mechanism's gains (for Mechanism::base_sum).
@@ -937,15 +941,8 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     const auto sp = lib[accepted_idx[a]]->shape_params();
     const auto ls = later_shape.find(a);
     for (std::size_t i = 0; i < sp.size(); ++i) {
-      Interval iv;
-      if (ls != later_shape.end()) {
-        std::vector<double> b;
-        for (const auto& r : ls->second.second) b.push_back(r[i]);
-        iv = to_interval(ls->second.first[i], b);
-      } else {
-        const double v = out.accepted_settings[a][i];
-        iv = {v, v, v};
-      }
+      const double v = out.accepted_settings[a][i];
+      const Interval iv = ls != later_shape.end() ? ls->second[i] : Interval{v, v, v};
       out.final_params.push_back({sp[i].name, sp[i].unit, iv, sp[i].plausible_lo, sp[i].plausible_hi, true, true});
     }
     for (const auto& g : lib[accepted_idx[a]]->gains()) {

@@ -42,6 +42,25 @@ LagRun run_lag(const synthetic::Options& o, int bootstrap) {
   r.f = fit_torque_lag(prep.data, r.d, lib, eo);
   return r;
 }
+// Adds a reflex term gain_pos LP[v+] + gain_neg LP[v-] (positive = resists
+// stretch) to the prepared target, built with the library's own columns at
+// the grid point nearest to delay 45 ms, f_n 3.2 Hz, zeta 0.75, so that the
+// engine can fit it exactly.
+void add_reflex_term(SingleJointPrepared& prep, const Mechanism& reflex, double gain_pos, double gain_neg) {
+  const std::vector<double> want{0.045, 3.2, 0.75};
+  const auto grid = reflex.grid(prep.data);
+  const auto setting = *std::min_element(grid.begin(), grid.end(), [&](const auto& p, const auto& q) {
+    double dp = 0, dq = 0;
+    for (std::size_t i = 0; i < want.size(); ++i) {
+      dp += std::pow((p[i] - want[i]) / want[i], 2);
+      dq += std::pow((q[i] - want[i]) / want[i], 2);
+    }
+    return dp < dq;
+  });
+  const auto cols = reflex.columns(prep.data, setting);
+  auto& seg = prep.data.segments.front();
+  for (std::size_t i = 0; i < seg.y.size(); ++i) seg.y[i] += gain_pos * cols.front()[0][i] + gain_neg * cols.front()[1][i];
+}
 double lag_param(const TorqueLagFit& f, const char* name) {
   for (const auto& q : f.params)
     if (q.name == name) return q.est.value;
@@ -149,15 +168,10 @@ TEST_CASE("a reflex term with a wrong-sign gain beyond its interval and above a 
   const auto lib = standard_library();
   const Mechanism* reflex = test::mechanism_by_id(lib, "stretch_reflex");
   REQUIRE(reflex);
-  const double fn = std::pow(25.0, 4.0 / 11.0);  // a point of the f_n grid (1-25 Hz, 12 log-spaced)
-  const std::vector<double> setting{0.045, fn, 0.75};
   for (const double ratio : {0.5, 0.2}) {
     auto prep = prepare_single_joint(g.record);
-    const auto cols = reflex->columns(prep.data, setting);
-    auto& seg = prep.data.segments.front();
-    // gain_pos_vel 8 resists positive stretch; gain_neg_vel -8 ratio pushes with negative motion
-    // (columns signed so that a positive gain resists stretch).
-    for (std::size_t i = 0; i < seg.y.size(); ++i) seg.y[i] += 8.0 * cols.front()[0][i] - 8.0 * ratio * cols.front()[1][i];
+    // gain_pos_vel 8 resists positive stretch; gain_neg_vel -8 ratio pushes with negative motion.
+    add_reflex_term(prep, *reflex, 8.0, -8.0 * ratio);
     EngineOptions eo;
     eo.bootstrap = 20;
     const auto d = diagnose(prep.data, lib, eo);
@@ -193,11 +207,7 @@ TEST_CASE("a relaxation and a reflex in one record - both named, each shape with
   const auto lib = standard_library();
   const Mechanism* reflex = test::mechanism_by_id(lib, "stretch_reflex");
   REQUIRE(reflex);
-  const double fn = std::pow(25.0, 4.0 / 11.0);  // a point of the f_n grid
-  const std::vector<double> setting{0.045, fn, 0.75};
-  const auto cols = reflex->columns(prep.data, setting);
-  auto& seg = prep.data.segments.front();
-  for (std::size_t i = 0; i < seg.y.size(); ++i) seg.y[i] += 10.0 * cols.front()[0][i];
+  add_reflex_term(prep, *reflex, 10.0, 0.0);
   EngineOptions eo;
   eo.bootstrap = 50;
   const auto d = diagnose(prep.data, lib, eo);
