@@ -60,6 +60,7 @@ class StretchReflexImpl final : public Mechanism {
   std::vector<ParamInfo> shape_params() const override {
     return {{"delay", "s", kDelayLo_s, kDelayHi_s}, {"fn", "Hz", kFnLo_hz, kFnHi_hz}, {"zeta", "1", 0.5, 1.0}};
   }
+  bool searchable_off_grid() const override { return true; }
   std::vector<ParamInfo> gains() const override {
     // Positive = resisting stretch in that direction (columns below are signed so).
     return {{"gain_pos_vel", "N m s/rad", 0.0, 50.0}, {"gain_neg_vel", "N m s/rad", 0.0, 50.0}};
@@ -134,15 +135,18 @@ class StretchReflexImpl final : public Mechanism {
     const double w = q - static_cast<double>(k);
     for (std::size_t i = k + 1; i < x.size(); ++i) y[i] = (1.0 - w) * x[i - k] + w * x[i - k - 1];
   }
-  Columns columns(const Dataset& d, std::span<const double> setting) const override {
-    const auto rect = rectified(d);
-    const auto c = reflex_lowpass_sos(setting[1], setting[2], d.dt_s);
-    Columns out(d.segments.size(), std::vector<std::vector<double>>(2));
+  Columns columns(const Dataset& d, std::span<const double> setting) const override { return columns_from(rectified(d), d.dt_s, setting); }
+  std::function<Columns(std::span<const double>)> columns_of(const Dataset& d) const override {
+    return [rect = rectified(d), dt = d.dt_s](std::span<const double> setting) { return columns_from(rect, dt, setting); };
+  }
+  static Columns columns_from(const std::vector<std::array<std::vector<double>, 2>>& rect, double dt_s, std::span<const double> setting) {
+    const auto c = reflex_lowpass_sos(setting[1], setting[2], dt_s);
+    Columns out(rect.size(), std::vector<std::vector<double>>(2));
     std::vector<double> tmp;
-    for (std::size_t s = 0; s < d.segments.size(); ++s)
-      for (int dir = 0; dir < 2; ++dir) {
-        lowpass(c, rect[s][static_cast<std::size_t>(dir)], tmp);
-        shift(tmp, setting[0], d.dt_s, out[s][static_cast<std::size_t>(dir)]);
+    for (std::size_t s = 0; s < rect.size(); ++s)
+      for (std::size_t dir = 0; dir < 2; ++dir) {
+        lowpass(c, rect[s][dir], tmp);
+        shift(tmp, setting[0], dt_s, out[s][dir]);
       }
     return out;
   }
@@ -223,6 +227,7 @@ class StiffnessRelaxationImpl final : public Mechanism {
     return "residual follows the position's deviation from its running mean over tau: the static stiffness is below the stiffness to fast motion";
   }
   std::vector<ParamInfo> shape_params() const override { return {{"tau_relax", "s", kTauLo_s, kTauHi_s}}; }
+  bool searchable_off_grid() const override { return true; }
   std::vector<std::vector<double>> grid(const Dataset&) const override {
     std::vector<std::vector<double>> g;
     for (int i = 0; i < kTauCount; ++i) g.push_back({kTauLo_s * std::pow(kTauHi_s / kTauLo_s, i / (kTauCount - 1.0))});
@@ -300,6 +305,7 @@ class CoulombFrictionImpl final : public Mechanism {
   // v_s, searched over 2-50 mrad/s (below the perturbation's velocities of
   // 0.1-3 rad/s, above an encoder's velocity noise).
   std::vector<ParamInfo> shape_params() const override { return {{"v_s", "rad/s", 0.002, 0.05}}; }
+  bool searchable_off_grid() const override { return true; }
   std::vector<std::vector<double>> grid(const Dataset&) const override {
     return {{0.002}, {0.005}, {0.01}, {0.02}, {0.05}};
   }

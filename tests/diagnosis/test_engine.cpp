@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <limits>
 #include <map>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -225,10 +226,51 @@ TEST_CASE("a relaxation and a reflex in one record - both named, each shape with
     CHECK(q->est.lo <= q->est.value);
     CHECK(q->est.value <= q->est.hi);
   }
-  CHECK(delay->est.lo <= 0.045);
-  CHECK(0.045 <= delay->est.hi);
+  // The reflex term sits on a grid point (45 ms, f_n 3.22 Hz, zeta 0.75),
+  // but its delay trades against its low pass along a ridge, and off the
+  // grid the noise moves the optimum along it: here 46.8 ms [45.5, 47.7],
+  // where an exhaustive search on a grid 16 times finer in f_n and 10 times
+  // in zeta around the truth finds 47.0 ms [45.5, 50.0] (a throwaway check,
+  // 2026-12-06). The block bootstrap's interval is narrower than that ridge
+  // ("Shape estimates and their intervals" in docs/diagnosis.md), so the
+  // delay is checked against the truth with a tolerance, not by its interval.
+  CHECK(rel_err(delay->est.value, 0.045) < 0.05);
   CHECK(tau->est.lo <= g.truth.tau_relax_s);
   CHECK(g.truth.tau_relax_s <= tau->est.hi);
+}
+
+// The reflex's shapes are searched on a grid (delay 1 ms, f_n ratio 1.34,
+// zeta in {0.5, 0.75, 1}), then off it on a finer lattice (engine.cpp,
+// LatticeSearch). Seed 2006 at 0.8 (a study record) has its truth between
+// the grid's points: zeta 0.656, whose nearest grid values 0.75 and 0.5 are
+// 14 % and 24 % off; f_n 4.38 Hz between 4.32 and 5.78.
+TEST_CASE("a reflex whose low pass lies between grid points - shapes refined between them, each with an interval", "[diagnosis][engine]") {
+  synthetic::Options o;
+  o.hidden = synthetic::Hidden::reflex;
+  o.magnitude = 0.8;
+  o.seed = 2006;
+  const auto r = run_synthetic(o, 20);
+  const auto& d = r.diag;
+  INFO("truth delay " << r.truth.delay_s << " fn " << r.truth.fn_hz << " zeta " << r.truth.zeta);
+  REQUIRE(d.misfit_found());
+  CHECK(d.accepted.front() == "stretch_reflex");
+  const auto* delay = d.find_final("delay");
+  const auto* fn = d.find_final("fn");
+  const auto* zeta = d.find_final("zeta");
+  REQUIRE(delay);
+  REQUIRE(fn);
+  REQUIRE(zeta);
+  INFO("delay " << delay->est.value << " fn " << fn->est.value << " [" << fn->est.lo << ", " << fn->est.hi << "] zeta " << zeta->est.value);
+  CHECK(rel_err(zeta->est.value, r.truth.zeta) < 0.07);  // no grid value is within 14 %
+  CHECK(rel_err(fn->est.value, r.truth.fn_hz) < 0.05);
+  CHECK(rel_err(delay->est.value, r.truth.delay_s) < 0.05);
+  // Off the grid: the grid's delays are whole milliseconds.
+  CHECK(std::fabs(delay->est.value * 1e3 - std::round(delay->est.value * 1e3)) > 1e-6);
+  for (const auto* q : {delay, fn, zeta}) {
+    CHECK(q->est.lo < q->est.hi);  // not collapsed onto one grid point
+    CHECK(q->est.lo <= q->est.value);
+    CHECK(q->est.value <= q->est.hi);
+  }
 }
 
 TEST_CASE("a wrong configured inertia is named when the baseline fixes it", "[diagnosis][engine]") {
@@ -439,7 +481,9 @@ TEST_CASE("detection study", "[.study]") {
                                   synthetic::Hidden::offset_drift, synthetic::Hidden::friction,
                                   synthetic::Hidden::relaxation};
   // MANIP_STUDY_ONLY=<mechanism id> runs that mechanism's rows only (no
-  // clean row); MANIP_STUDY_MAGS="0.4,0.8" replaces the three magnitudes.
+  // clean row); MANIP_STUDY_MAGS="0.4,0.8" replaces the three magnitudes;
+  // MANIP_STUDY_SHAPES=1 prints every named session's shape estimates with
+  // their intervals and truths (stderr; the per-cell summary is always there).
   const char* only = std::getenv("MANIP_STUDY_ONLY");
   std::vector<double> mags{0.05, 0.15, 0.40};
   if (const char* m = std::getenv("MANIP_STUDY_MAGS")) {
@@ -471,6 +515,10 @@ TEST_CASE("detection study", "[.study]") {
       if (only && std::string(only) != synthetic::name(h)) continue;
       int first = 0, mp = 0, gain = 0, kok = 0, bok = 0;
       std::vector<double> errs, gains;
+      // Every shape parameter of the hidden mechanism, over the named sessions:
+      // relative errors and how often its bootstrap interval covers the truth.
+      std::map<std::string, std::vector<double>> shape_err;
+      std::map<std::string, int> shape_cover;
       for (int s = 0; s < seeds; ++s) {
         synthetic::Options o;
         o.hidden = h;
@@ -490,6 +538,17 @@ TEST_CASE("detection study", "[.study]") {
           std::fprintf(stderr, "%s %.2f seed %llu: %s\n", synthetic::name(h), m, static_cast<unsigned long long>(o.seed),
                        d.misfit_found() ? d.accepted.front().c_str() : "nothing named");
         if (named) {
+          const auto& t = r.truth;
+          const std::pair<const char*, double> shapes[] = {
+              {"delay", t.delay_s}, {"fn", t.fn_hz}, {"zeta", t.zeta}, {"tau_relax", t.tau_relax_s}, {"v_s", t.v_s}};
+          for (const auto& [nm, tv] : shapes)
+            if (const auto* p = d.find_final(nm); p && tv > 0) {
+              shape_err[nm].push_back(rel_err(p->est.value, tv));
+              if (std::getenv("MANIP_STUDY_SHAPES"))  // every named session's shape estimates, one line each
+                std::fprintf(stderr, "%s %.2f seed %llu shape %s: %.5g [%.5g, %.5g], truth %.5g\n", synthetic::name(h), m,
+                             static_cast<unsigned long long>(o.seed), nm, p->est.value, p->est.lo, p->est.hi, tv);
+              shape_cover[nm] += p->est.lo <= tv && tv <= p->est.hi;
+            }
           const double e = rel_err(d.find_final(synthetic::main_param_name(h))->est.value, r.truth.main_param(h));
           errs.push_back(e);
           mp += e < 0.2;
@@ -498,6 +557,11 @@ TEST_CASE("detection study", "[.study]") {
         gain += d.heldout_gain.lo > 0.0;
         kok += rel_err(d.find_final("K")->est.value, r.truth.K) < 0.10;
         bok += rel_err(d.find_final("B")->est.value, r.truth.B) < 0.20;
+      }
+      for (auto& [nm, e] : shape_err) {
+        std::sort(e.begin(), e.end());
+        std::fprintf(stderr, "%s %.2f shape %s: median |err| %.3f, mean %.3f, interval covers %d/%zu\n", synthetic::name(h), m, nm.c_str(),
+                     e[e.size() / 2], std::accumulate(e.begin(), e.end(), 0.0) / static_cast<double>(e.size()), shape_cover[nm], e.size());
       }
       std::sort(errs.begin(), errs.end());
       std::sort(gains.begin(), gains.end());

@@ -37,6 +37,17 @@ class Mechanism {
   [[nodiscard]] virtual Columns columns(const Dataset&, std::span<const double> setting) const = 0;
   // All settings in an order the mechanism can compute cheaply; f(index into grid(), columns).
   virtual void for_each_setting(const Dataset& d, const std::function<void(std::size_t, const Columns&)>& f) const;
+  // True when columns() takes any setting within the grid's range, not only
+  // grid points: the engine then continues the search of the reported shape
+  // off the grid (engine.cpp, LatticeSearch). Mechanisms whose columns are
+  // prepared per grid point (the manipulandum's stage friction) keep false.
+  [[nodiscard]] virtual bool searchable_off_grid() const { return false; }
+  // columns(d, setting) for many settings off the grid (the engine's search
+  // between grid points): what does not depend on the setting is computed
+  // once, in the returned function (which keeps a reference to d).
+  [[nodiscard]] virtual std::function<Columns(std::span<const double>)> columns_of(const Dataset& d) const {
+    return [this, &d](std::span<const double> setting) { return columns(d, setting); };
+  }
   // Samples of history the columns need at the start of a segment.
   [[nodiscard]] virtual std::size_t history_samples(const Dataset&) const { return 0; }
   // Index into [shape params..., gains...] of the parameter the tests check.
