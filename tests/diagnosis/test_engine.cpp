@@ -198,7 +198,7 @@ TEST_CASE("a reflex term with a wrong-sign gain beyond its interval and above a 
 // Two mechanisms with shape grids: the second one's shape gets its interval
 // from its own search in the bootstrap replicates (the first one's from the
 // replicates that also give the gains), both containing the truth.
-TEST_CASE("a relaxation and a reflex in one record - both named, each shape with a bootstrap interval around the truth", "[diagnosis][engine]") {
+TEST_CASE("a relaxation and a reflex in one record - both named, each shape with a bootstrap interval, tau around the truth, the delay within 5 %", "[diagnosis][engine]") {
   synthetic::Options o;
   o.hidden = synthetic::Hidden::relaxation;
   o.magnitude = 0.8;
