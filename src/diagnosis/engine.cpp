@@ -1060,20 +1060,27 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
   // point: the reported shape and its gains are those of one setting, and
   // neither the estimate nor its interval is held to the grid's spacing (a
   // percentile interval of grid values collapses to one point when the
-  // replicates agree on it).
+  // replicates agree on it). `ls` is built at the first call, its lattice
+  // anchored at that call's (the full-data fit's) best grid point; `kept`:
+  // the other accepted columns, at their named shapes.
+  struct ShapeFit {
+    VectorXd th;
+    std::vector<double> shape;
+  };
+  auto search_shape = [&](const Mechanism& mech, const Model& kept, std::optional<LatticeSearch>& ls,
+                          const std::vector<std::vector<double>>& gset, const std::vector<std::vector<CandStats>>& gstats,
+                          const Stats& s, Eigen::Index p, const std::vector<double>& w) {
+    auto f = grid_search(s, p, gstats, w);
+    if (!mech.searchable_off_grid()) return ShapeFit{std::move(f.th), gset[f.g]};
+    if (!ls) ls.emplace(d, mech, kept, blocks, gset, gset[f.g]);
+    auto r = ls->search(gset[f.g], s, p, w);
+    return ShapeFit{std::move(r.th), std::move(r.shape)};
+  };
   std::optional<LatticeSearch> lattice;
   auto fit_weighted = [&](const std::vector<double>& w, std::vector<double>& shape) {
     const Stats s = weighted(bs_fixed, w, pf);
     if (gridded < 0) return VectorXd(solve(s.G, s.h));
-    const auto f = grid_search(s, pf, grid_stats, w);
-    const auto& gmech = *lib[accepted_idx[static_cast<std::size_t>(gridded)]];
-    if (!gmech.searchable_off_grid()) {
-      shape = grid_set[f.g];
-      return f.th;
-    }
-    if (!lattice)
-      lattice.emplace(d, gmech, fixed, blocks, grid_set, grid_set[f.g]);
-    auto r = lattice->search(grid_set[f.g], s, pf, w);
+    auto r = search_shape(*lib[accepted_idx[static_cast<std::size_t>(gridded)]], fixed, lattice, grid_set, grid_stats, s, pf, w);
     shape = std::move(r.shape);
     return r.th;
   };
@@ -1110,11 +1117,7 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     mech.for_each_setting(d, [&](std::size_t g, const Columns& cols) { gstats[g] = cand_stats(d, others, blocks, cols); });
     std::optional<LatticeSearch> ls;
     auto best_shape = [&](const std::vector<double>& w) {
-      const Stats s = weighted(bs_o, w, po);
-      const auto f = grid_search(s, po, gstats, w);
-      if (!mech.searchable_off_grid()) return gset[f.g];
-      if (!ls) ls.emplace(d, mech, others, blocks, gset, gset[f.g]);
-      return ls->search(gset[f.g], s, po, w).shape;
+      return search_shape(mech, others, ls, gset, gstats, weighted(bs_o, w, po), po, w).shape;
     };
     const auto full = best_shape(ones);
     std::vector<std::vector<double>> boot(full.size());
