@@ -1005,32 +1005,20 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       out.baseline_params.push_back({d.base_names[static_cast<std::size_t>(i)], d.base_units[static_cast<std::size_t>(i)],
                                      to_interval(th0(i), boot[static_cast<std::size_t>(i)]), 0, 0, false});
   }
-  // The first accepted mechanism with a shape grid has its shape re-searched
-  // in every replicate (its cross statistics against all other columns); the
-  // gains' intervals come from these replicates, with the other mechanisms
-  // at their named shapes. Each later gridded mechanism gets its shape's
-  // interval from a search of its own in the same replicates, the others
-  // (the first gridded one included) at their named shapes (below).
+  // Each later gridded mechanism (after the first accepted one with a shape
+  // grid) gets its shape and the shape's interval from a search of its own
+  // in the block-bootstrap replicates, every other accepted mechanism at its
+  // named shape. Then the first gridded mechanism has its shape re-searched
+  // in the full data and every replicate, the later ones at their shapes so
+  // found: every gain, every baseline parameter and their intervals come
+  // from these fits, so that the report's parameters all belong to one
+  // model, the one whose residual is "what remains" below.
   int gridded = -1;
   for (std::size_t a = 0; a < accepted_idx.size(); ++a)
     if (lib[accepted_idx[a]]->grid(d).size() > 1) {
       gridded = static_cast<int>(a);
       break;
     }
-  Model fixed;
-  for (std::size_t a = 0; a < accepted_idx.size(); ++a)
-    if (static_cast<int>(a) != gridded) fixed.extras.push_back(&accepted_cols[a]);
-  const Eigen::Index pf = fixed.p(d);
-  const auto bs_fixed = block_stats(d, fixed, blocks);
-  // Parameter layout: base + fixed extras' gains, then the gridded mechanism's shape + gains.
-  std::vector<std::vector<double>> grid_set;
-  std::vector<std::vector<CandStats>> grid_stats;
-  if (gridded >= 0) {
-    const auto& mech = *lib[accepted_idx[static_cast<std::size_t>(gridded)]];
-    grid_set = mech.grid(d);
-    grid_stats.resize(grid_set.size());
-    mech.for_each_setting(d, [&](std::size_t s, const Columns& cols) { grid_stats[s] = cand_stats(d, fixed, blocks, cols); });
-  }
   // The grid point of least weighted SSE against the fixed columns' weighted
   // statistics s (p_fixed parameters), and its solution.
   struct GridFit {
@@ -1076,33 +1064,12 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     auto r = ls->search(gset[f.g], s, p, w);
     return ShapeFit{std::move(r.th), std::move(r.shape)};
   };
-  std::optional<LatticeSearch> lattice;
-  auto fit_weighted = [&](const std::vector<double>& w, std::vector<double>& shape) {
-    const Stats s = weighted(bs_fixed, w, pf);
-    if (gridded < 0) return VectorXd(solve(s.G, s.h));
-    auto r = search_shape(*lib[accepted_idx[static_cast<std::size_t>(gridded)]], fixed, lattice, grid_set, grid_stats, s, pf, w);
-    shape = std::move(r.shape);
-    return r.th;
-  };
-  std::vector<double> ones(blocks.size(), 1.0), shape_full;
-  const VectorXd th_full = fit_weighted(ones, shape_full);
-  std::vector<VectorXd> th_boot;
-  std::vector<std::vector<double>> shape_boot;
-  for (const auto& w : W) {
-    std::vector<double> sh;
-    th_boot.push_back(fit_weighted(w, sh));
-    shape_boot.push_back(sh);
-  }
-  auto column_interval = [&](Eigen::Index i) {
-    std::vector<double> b;
-    for (const auto& t : th_boot) b.push_back(t(i));
-    return to_interval(th_full(i), b);
-  };
-  for (Eigen::Index i = 0; i < p0; ++i)
-    out.final_params.push_back({d.base_names[static_cast<std::size_t>(i)], d.base_units[static_cast<std::size_t>(i)], column_interval(i), 0, 0, false});
   // Shape of each later gridded mechanism: its full-data optimum with the
-  // replicates' percentiles, every other accepted mechanism fixed.
+  // replicates' percentiles, every other accepted mechanism fixed; its
+  // columns at that optimum join the fixed ones below.
+  std::vector<double> ones(blocks.size(), 1.0), shape_full;
   std::map<std::size_t, std::vector<Interval>> later_shape;
+  std::map<std::size_t, Columns> later_cols;
   for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
     const auto& mech = *lib[accepted_idx[a]];
     const auto gset = mech.grid(d);
@@ -1126,7 +1093,48 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       for (std::size_t i = 0; i < sh.size(); ++i) boot[i].push_back(sh[i]);
     }
     for (std::size_t i = 0; i < full.size(); ++i) later_shape[a].push_back(to_interval(full[i], boot[i]));
+    later_cols.emplace(a, full == out.accepted_settings[a] ? accepted_cols[a] : mech.columns(d, full));
   }
+  Model fixed;
+  for (std::size_t a = 0; a < accepted_idx.size(); ++a)
+    if (static_cast<int>(a) != gridded) {
+      const auto lc = later_cols.find(a);
+      fixed.extras.push_back(lc != later_cols.end() ? &lc->second : &accepted_cols[a]);
+    }
+  const Eigen::Index pf = fixed.p(d);
+  const auto bs_fixed = block_stats(d, fixed, blocks);
+  // Parameter layout: base + fixed extras' gains, then the gridded mechanism's shape + gains.
+  std::vector<std::vector<double>> grid_set;
+  std::vector<std::vector<CandStats>> grid_stats;
+  if (gridded >= 0) {
+    const auto& mech = *lib[accepted_idx[static_cast<std::size_t>(gridded)]];
+    grid_set = mech.grid(d);
+    grid_stats.resize(grid_set.size());
+    mech.for_each_setting(d, [&](std::size_t s, const Columns& cols) { grid_stats[s] = cand_stats(d, fixed, blocks, cols); });
+  }
+  std::optional<LatticeSearch> lattice;
+  auto fit_weighted = [&](const std::vector<double>& w, std::vector<double>& shape) {
+    const Stats s = weighted(bs_fixed, w, pf);
+    if (gridded < 0) return VectorXd(solve(s.G, s.h));
+    auto r = search_shape(*lib[accepted_idx[static_cast<std::size_t>(gridded)]], fixed, lattice, grid_set, grid_stats, s, pf, w);
+    shape = std::move(r.shape);
+    return r.th;
+  };
+  const VectorXd th_full = fit_weighted(ones, shape_full);
+  std::vector<VectorXd> th_boot;
+  std::vector<std::vector<double>> shape_boot;
+  for (const auto& w : W) {
+    std::vector<double> sh;
+    th_boot.push_back(fit_weighted(w, sh));
+    shape_boot.push_back(sh);
+  }
+  auto column_interval = [&](Eigen::Index i) {
+    std::vector<double> b;
+    for (const auto& t : th_boot) b.push_back(t(i));
+    return to_interval(th_full(i), b);
+  };
+  for (Eigen::Index i = 0; i < p0; ++i)
+    out.final_params.push_back({d.base_names[static_cast<std::size_t>(i)], d.base_units[static_cast<std::size_t>(i)], column_interval(i), 0, 0, false});
   Eigen::Index col = p0;
   // Column of each accepted mechanism's gains (for Mechanism::base_sum).
   std::vector<Eigen::Index> gain_col(accepted_idx.size(), -1);
@@ -1172,11 +1180,27 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     for (const auto& t : th_boot) b.push_back(t(ib) + t(ig));
     out.derived_params.push_back({{bsum.name, d.base_units[static_cast<std::size_t>(ib)], to_interval(th_full(ib) + th_full(ig), b), 0, 0, false}, bsum.base, bsum.meaning});
   }
-  // What remains: signatures of the final model's residual.
+  // What remains: signatures of the final model's residual, with each
+  // accepted mechanism at its reported shape (the search between grid
+  // points above; its named grid shape when it has no grid or is not
+  // searched off it), so that the residual and each term's share below
+  // belong to the parameters the report prints.
   {
-    const VectorXd th = fit_full(d, model.extras, history).theta;
+    Columns gridded_cols;
+    Model final_model;
+    for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
+      const Columns* c = &accepted_cols[a];
+      if (static_cast<int>(a) == gridded && shape_full != out.accepted_settings[a]) {
+        gridded_cols = lib[accepted_idx[a]]->columns(d, shape_full);
+        c = &gridded_cols;
+      } else if (const auto lc = later_cols.find(a); lc != later_cols.end()) {
+        c = &lc->second;
+      }
+      final_model.extras.push_back(c);
+    }
+    const VectorXd th = fit_full(d, final_model.extras, history).theta;
     std::vector<std::pair<std::size_t, std::size_t>> where;
-    const auto r = residual(d, model, blocks, th, &where);
+    const auto r = residual(d, final_model, blocks, th, &where);
     out.after = signatures(d, blocks, r, where, opt.alpha);
     // Each accepted term's RMS, and the target's, over the usable blocks.
     auto rms_about_mean = [](const std::vector<double>& x) {
@@ -1190,7 +1214,8 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
       for (std::size_t i = bl.begin; i < bl.end; ++i) yv.push_back(d.segments[bl.seg].y[i]);
     out.target_rms = rms_about_mean(yv);
     Eigen::Index c0 = p0;
-    for (const auto& cols : accepted_cols) {
+    for (const auto* cp : final_model.extras) {
+      const auto& cols = *cp;
       std::vector<double> term;
       for (const auto& bl : blocks)
         for (std::size_t i = bl.begin; i < bl.end; ++i) {
