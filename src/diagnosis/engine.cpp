@@ -1190,10 +1190,15 @@ Diagnosis diagnose(const Dataset& d, const std::vector<std::unique_ptr<Mechanism
     Model final_model;
     for (std::size_t a = 0; a < accepted_idx.size(); ++a) {
       const Columns* c = &accepted_cols[a];
-      if (static_cast<int>(a) == gridded && shape_full != out.accepted_settings[a]) {
-        gridded_cols = lib[accepted_idx[a]]->columns(d, shape_full);
-        c = &gridded_cols;
+      out.final_settings.push_back(out.accepted_settings[a]);
+      if (static_cast<int>(a) == gridded) {
+        out.final_settings.back() = shape_full;
+        if (shape_full != out.accepted_settings[a]) {
+          gridded_cols = lib[accepted_idx[a]]->columns(d, shape_full);
+          c = &gridded_cols;
+        }
       } else if (const auto lc = later_cols.find(a); lc != later_cols.end()) {
+        for (std::size_t i = 0; i < later_shape[a].size(); ++i) out.final_settings.back()[i] = later_shape[a][i].value;
         c = &lc->second;
       }
       final_model.extras.push_back(c);

@@ -60,7 +60,7 @@ TorqueLagFit fit_torque_lag(const Dataset& d, const Diagnosis& res, const std::v
     return f;
   }
   const auto& g = d.segments.front();
-  // The model's columns: the baseline's, then the named mechanisms' at their shapes.
+  // The model's columns: the baseline's, then the named mechanisms' at their reported shapes.
   std::vector<std::vector<double>> cols = g.base;
   std::vector<std::string> names = d.base_names, units = d.base_units;
   std::size_t history = 0;
@@ -69,7 +69,7 @@ TorqueLagFit fit_torque_lag(const Dataset& d, const Diagnosis& res, const std::v
   for (std::size_t a = 0; a < res.accepted.size(); ++a)
     for (const auto& m : lib)
       if (m->id() == res.accepted[a]) {
-        const auto c = m->columns(d, res.accepted_settings[a]);
+        const auto c = m->columns(d, res.shape_of(a));
         for (const auto& col : c.front()) cols.push_back(col);
         for (const auto& gi : m->gains()) {
           names.push_back(gi.name);

@@ -161,7 +161,14 @@ struct Diagnosis {
   Signatures before, after;
   std::vector<Round> rounds;
   std::vector<std::string> accepted;        // mechanism ids, in the order added
-  std::vector<std::vector<double>> accepted_settings;
+  std::vector<std::vector<double>> accepted_settings;  // the search rounds' shapes (grid points)
+  // Each accepted mechanism's shape in the extended model as reported
+  // (searched off the grid where the mechanism allows it; empty when no
+  // final fit was made): shape_of(a) is the one to build its columns from.
+  std::vector<std::vector<double>> final_settings;
+  [[nodiscard]] const std::vector<double>& shape_of(std::size_t a) const {
+    return a < final_settings.size() ? final_settings[a] : accepted_settings.at(a);
+  }
   std::vector<ParamEstimate> final_params;  // base then each accepted mechanism's shape params and gains
   // Sums of a baseline parameter and an accepted gain that mean something
   // physical (Mechanism::base_sum: K + dK of a relaxing stiffness), with
