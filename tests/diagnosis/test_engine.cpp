@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Dense>
+
 #include "diag_test_util.hpp"
 #include "manip/common/errors.hpp"
 #include "manip/diagnosis/report.hpp"
@@ -237,6 +239,46 @@ TEST_CASE("a relaxation and a reflex in one record - both named, each shape with
   CHECK(rel_err(delay->est.value, 0.045) < 0.05);
   CHECK(tau->est.lo <= g.truth.tau_relax_s);
   CHECK(g.truth.tau_relax_s <= tau->est.hi);
+
+  // One model: each mechanism's reported shape is the one its columns are
+  // built from (Diagnosis::shape_of), and the reported gains are those of a
+  // least-squares fit of the baseline and every named mechanism at those
+  // shapes - here an independent fit over every sample past the library's
+  // history, where the engine fits its blocks (so within 1 %, not exactly).
+  REQUIRE(d.final_settings.size() == d.accepted.size());
+  const auto& seg = prep.data.segments.front();
+  std::size_t history = 0;
+  for (const auto& m : lib) history = std::max(history, m->history_samples(prep.data));
+  std::vector<const std::vector<double>*> cols;
+  for (const auto& c : seg.base) cols.push_back(&c);
+  std::vector<Columns> named;
+  named.reserve(d.accepted.size());
+  std::vector<std::string> gain_names;
+  for (std::size_t a = 0; a < d.accepted.size(); ++a) {
+    const auto* m = test::mechanism_by_id(lib, d.accepted[a]);
+    REQUIRE(m);
+    const auto sp = m->shape_params();
+    REQUIRE(d.shape_of(a).size() == sp.size());
+    for (std::size_t i = 0; i < sp.size(); ++i) {
+      REQUIRE(d.find_final(sp[i].name));
+      CHECK(d.shape_of(a)[i] == d.find_final(sp[i].name)->est.value);
+    }
+    named.push_back(m->columns(prep.data, d.shape_of(a)));
+    for (const auto& c : named.back().front()) cols.push_back(&c);
+    for (const auto& gi : m->gains()) gain_names.push_back(gi.name);
+  }
+  CHECK(d.shape_of(0) != d.accepted_settings[0]);  // searched off the grid
+  const auto n = static_cast<Eigen::Index>(seg.y.size() - history);
+  Eigen::MatrixXd X(n, static_cast<Eigen::Index>(cols.size()));
+  for (std::size_t j = 0; j < cols.size(); ++j)
+    X.col(static_cast<Eigen::Index>(j)) = Eigen::Map<const Eigen::VectorXd>(cols[j]->data() + history, n);
+  const Eigen::VectorXd th = X.colPivHouseholderQr().solve(Eigen::Map<const Eigen::VectorXd>(seg.y.data() + history, n));
+  const auto p0 = static_cast<Eigen::Index>(seg.base.size());
+  for (std::size_t k = 0; k < gain_names.size(); ++k) {
+    const double reported = d.find_final(gain_names[k])->est.value, fitted = th(p0 + static_cast<Eigen::Index>(k));
+    INFO(gain_names[k] << " reported " << reported << ", fitted at the reported shapes " << fitted);
+    CHECK(std::fabs(reported - fitted) < 0.01 * std::fabs(fitted) + 0.02);
+  }
 }
 
 // The reflex's shapes are searched on a grid (delay 1 ms, f_n ratio 1.34,
