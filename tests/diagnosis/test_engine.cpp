@@ -94,7 +94,7 @@ TEST_CASE("each hidden mechanism at the middle magnitude is found, named first a
       o.hidden = h;
       o.magnitude = kMiddle;
       o.seed = 7;
-            const auto r = run_synthetic(o);
+      const auto r = run_synthetic(o);
       const auto& d = r.diag;
       INFO("truth K " << r.truth.K << " B " << r.truth.B << " main " << r.truth.main_param(h));
       REQUIRE(d.misfit_found());

@@ -44,7 +44,9 @@ class Mechanism {
   [[nodiscard]] virtual bool searchable_off_grid() const { return false; }
   // columns(d, setting) for many settings off the grid (the engine's search
   // between grid points): what does not depend on the setting is computed
-  // once, in the returned function (which keeps a reference to d).
+  // once, in the returned function (which keeps a reference to d, and may
+  // keep a cache between calls - the reflex keeps its recent low passes -
+  // so one function is called from one thread at a time).
   [[nodiscard]] virtual std::function<Columns(std::span<const double>)> columns_of(const Dataset& d) const {
     return [this, &d](std::span<const double> setting) { return columns(d, setting); };
   }
