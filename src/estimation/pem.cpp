@@ -36,7 +36,6 @@ constexpr double kLogHi[4] = {23.0, 2.3, 0.0, 9.2};      // q 1e10, σ 10 N, τ 
 // half the multiplications in the innovations and 60 % in the time update.
 struct Discrete {
   Mat10 phi;
-  Eigen::Matrix<double, 4, kNx> phi_top;  // Φ's rows of p and v
   bool tail_sparse{false};
   Mat10x2 gam;
   Mat10 q;
@@ -57,7 +56,7 @@ bool tail_is_sparse(const Mat10& phi) {
 Vec10 phi_times(const Discrete& m, const Vec10& v) {
   if (!m.tail_sparse) return m.phi.lazyProduct(v);
   Vec10 out;
-  out.head<4>().noalias() = m.phi_top.lazyProduct(v);
+  out.head<4>().noalias() = m.phi.topRows<4>().lazyProduct(v);
   out(4) = m.phi(4, 4) * v(4) + m.phi(4, 6) * v(6);
   out(5) = m.phi(5, 5) * v(5) + m.phi(5, 7) * v(7);
   for (int i = 6; i < kNx; ++i) out(i) = m.phi(i, i) * v(i);
@@ -120,7 +119,6 @@ Discrete discretise(const Layout& l, const Eigen::VectorXd& p, const Mat2& m_tot
   const Eigen::Matrix<double, 2 * kNx, 2 * kNx> ev = vl.exp();
   Discrete d;
   d.phi = ev.bottomRightCorner<kNx, kNx>().transpose();
-  d.phi_top = d.phi.topRows<4>();
   d.tail_sparse = tail_is_sparse(d.phi);
   d.q = d.phi * ev.topRightCorner<kNx, kNx>();
   d.q = 0.5 * (d.q + d.q.transpose()).eval();
@@ -194,11 +192,11 @@ Gains riccati(const Discrete& m, std::size_t n, double sigma_n) {
     // ones, and (Φ P) Φᵀ four full columns and six scaled ones.
     if (m.tail_sparse) {
       Mat10 pp;
-      pp.topRows<4>().noalias() = m.phi_top.lazyProduct(p);
+      pp.topRows<4>().noalias() = m.phi.topRows<4>().lazyProduct(p);
       pp.row(4) = m.phi(4, 4) * p.row(4) + m.phi(4, 6) * p.row(6);
       pp.row(5) = m.phi(5, 5) * p.row(5) + m.phi(5, 7) * p.row(7);
       for (int i = 6; i < kNx; ++i) pp.row(i) = m.phi(i, i) * p.row(i);
-      p.leftCols<4>().noalias() = pp.lazyProduct(m.phi_top.transpose());
+      p.leftCols<4>().noalias() = pp.lazyProduct(m.phi.topRows<4>().transpose());
       p.col(4) = m.phi(4, 4) * pp.col(4) + m.phi(4, 6) * pp.col(6);
       p.col(5) = m.phi(5, 5) * pp.col(5) + m.phi(5, 7) * pp.col(7);
       for (int i = 6; i < kNx; ++i) p.col(i) = m.phi(i, i) * pp.col(i);
