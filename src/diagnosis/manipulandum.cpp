@@ -1,5 +1,6 @@
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/diagnosis/report.hpp"
+#include "manip/diagnosis/sensor_delay.hpp"
 #include "manip/diagnosis/stats.hpp"
 
 #include <algorithm>
@@ -191,6 +192,37 @@ void baseline_row(int a, const Vector2d& dxd, const Vector2d& dx, double out[7])
   out[6] = a == 1 ? dx(1) : 0.0;
 }
 
+// I[u_pert] for the force-sensor delay fit (sensor_delay.hpp): the held
+// command's exact double integral (v += u dt, x += v dt + u dt²/2 per cycle)
+// as the trial's position, isolated by the estimator's own code from
+// kSensorDelayMaxS (+1 ms) before onset, so that the fit can delay it.
+// Trials with too little before onset keep it empty (the fit skips them).
+void isolated_u_pert(const estimation::SessionInfo& info, const estimation::TrialData& trial,
+                     const estimation::PipelineSettings& pipeline, PlanarTrial& p) {
+  const double fs = info.sample_rate_hz, dt = 1.0 / fs;
+  const auto pre = static_cast<std::size_t>(std::ceil((kSensorDelayMaxS + 0.001) * fs));
+  const auto on = static_cast<std::size_t>(trial.onset_index);
+  if (trial.onset_index < 0 || on < pre || trial.u_pert_n.size() != trial.x_m.size()) return;
+  estimation::TrialData g = trial;
+  Vector2d v = Vector2d::Zero(), x = Vector2d::Zero();
+  for (std::size_t i = 0; i < g.x_m.size(); ++i) {
+    g.x_m[i] = x;
+    const Vector2d& u = trial.u_pert_n[i];
+    x += v * dt + u * (0.5 * dt * dt);
+    v += u * dt;
+  }
+  g.onset_index = static_cast<std::int64_t>(on - pre);
+  estimation::PipelineSettings ps = pipeline;
+  const auto n_win = static_cast<std::size_t>(std::llround(pipeline.t_est_s * fs)) + 1;
+  ps.t_est_s = static_cast<double>(n_win - 1 + pre) / fs;
+  try {
+    p.u_pert_iso = estimation::isolate_variational(info, g, ps).dxdd;
+    p.u_pert_iso_pre = pre;
+  } catch (const std::invalid_argument&) {
+    p.u_pert_iso.clear();  // too short after onset for the longer window: the fit skips the trial
+  }
+}
+
 }  // namespace
 
 PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const PlanarOptions& opt, int folds) {
@@ -270,6 +302,7 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
           p.xd_stage[k] = t.xd_ref_m.at(i);
         }
         p.friction_iso = isolated_stage_friction(ses.info, t, opt.estimator.pipeline, rot);
+        isolated_u_pert(ses.info, t, opt.estimator.pipeline, p);
         if (opt.pem_baseline) {
           out.vw.push_back(std::move(vw));
           out.m_bsp.push_back(*m_bsp);
@@ -1446,6 +1479,26 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
     jr[n] = v;
   }
   o << "\n  (apparatus mechanisms between the logged force and the handle make the two routes disagree; person-side ones do not)\n";
+  const auto sdl = sensor_delay(prep.data);
+  nlohmann::json jd = {{"available", sdl.available}};
+  if (sdl.available) {
+    o << "  actuation delay read from the force sensor: " << g4(1e3 * sdl.tau_s) << " ms [" << g4(1e3 * sdl.lo_s) << ", " << g4(1e3 * sdl.hi_s)
+      << "] (95 % bootstrap over " << sdl.trials << " trials; the disagreement as u_pert − I[u_pert(t − tau)], " << g4(100 * sdl.explained_share)
+      << " % of it explained";
+    if (sdl.friction_n != 0.0) o << ", with stage friction " << g4(sdl.friction_n) << " N at v_s " << g4(1e3 * sdl.friction_vs_mps) << " mm/s";
+    o << "; 0.03 ms below the truth on simulated sessions)\n";
+    jd.update({{"tau_s", sdl.tau_s},
+               {"tau_ci95_s", {sdl.lo_s, sdl.hi_s}},
+               {"explained_share", sdl.explained_share},
+               {"b_ddx_kg", sdl.mass_kg},
+               {"friction_n", sdl.friction_n},
+               {"friction_vs_mps", sdl.friction_vs_mps},
+               {"trials", sdl.trials},
+               {"bootstrap", sdl.bootstrap}});
+  } else {
+    o << "  actuation delay read from the force sensor: not available (" << sdl.why_not << ")\n";
+    jd["why_not"] = sdl.why_not;
+  }
   o << "\nData: " << prep.n_trials << " trials, " << prep.n_perturbed << " perturbed, " << prep.data.planar.size() << " used";
   if (!prep.excluded.empty()) {
     o << "; excluded:\n";
@@ -1465,7 +1518,7 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
             {"final_D_Nspm", jmat(z1.d)},
             {"final_K_Npm", jmat(z1.k)},
             {"windows", jw},
-            {"sensor_disagreement", {{"rms_share", sd.rms_share}, {"rho", jr}}}};
+            {"sensor_disagreement", {{"rms_share", sd.rms_share}, {"rho", jr}, {"actuation_delay", jd}}}};
   if (prep.pem.available)
     r.json["default_method"] = {{"method", prep.pem.method},
                                 {"D_Nspm", jmat(prep.pem.d)},

@@ -41,6 +41,12 @@ struct PlanarTrial {
   // workspace axis, rotated to the shoulder frame, one series per v_s of the
   // stage_friction grid (isolated_stage_friction in manipulandum.hpp).
   std::vector<std::vector<Eigen::Vector2d>> friction_iso;
+  // I[u_pert]: the logged force as a zero-order-held staircase, double
+  // integrated exactly and isolated as the trial's acceleration is, over
+  // [onset − u_pert_iso_pre samples, onset + T_est], integrated from its
+  // first sample (sensor_delay.hpp: the actuation delay from the force sensor).
+  std::vector<Eigen::Vector2d> u_pert_iso;
+  std::size_t u_pert_iso_pre = 0;
 };
 
 struct Segment {
