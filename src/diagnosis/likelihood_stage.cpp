@@ -387,10 +387,45 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
   // hidden 2 ms actuation delay with 1 N of friction left the friction
   // amplitude holding part of the delay, the delay 10-20 % short and D 20-50 %
   // low (docs/diagnosis.md, "Joint refit").
+  //
+  // A named actuation delay is not profiled: it takes the delay the force
+  // sensor reads (prep.sensor_delay; sensor_delay.hpp), which sees the delay
+  // without the person's motor noise. The kinematic likelihood is nearly
+  // flat along D against the delay (τ u̇_pert and D Δẋ overlap early in the
+  // window): its delay scattered by ±0.3 ms, and D moves 10-16 % per 0.1 ms
+  // (docs/diagnosis.md, "Actuation delay: D rides on the delay"); the
+  // sensor's by ±0.005 ms, 0.03 ms below the truth. Only a reading that
+  // explains at least half of the disagreement and lies inside the
+  // mechanism's bounds is taken; the likelihood still decides whether the
+  // delay is named.
+  auto sensor_amplitude = [&](const Cand& c, double& half_width) -> std::optional<double> {
+    const auto& sd = prep.sensor_delay;
+    if (c.mech->id() != "actuation_delay" || !sd.available || !(sd.explained_share >= 0.5) || c.gains_ee.size() != 1) return std::nullopt;
+    const auto bounds = c.mech->gains().front();
+    const double per_unit = c.gains_ee[0];  // τ = α × gains_ee[0] (correction_of, set_amplitude)
+    if (!(sd.tau_s > bounds.plausible_lo && sd.tau_s < bounds.plausible_hi) || !(std::fabs(per_unit) > 1e-12)) return std::nullopt;
+    half_width = 0.5 * (sd.hi_s - sd.lo_s) / std::fabs(per_unit);
+    return sd.tau_s / per_unit;
+  };
   auto refit_jointly = [&](std::vector<Accepted>& list, PemBaseline& fit) {
+    std::vector<bool> fixed(list.size(), false);
+    for (std::size_t j = 0; j < list.size(); ++j) {
+      double h = 0.0;
+      if (const auto a = sensor_amplitude(cands[list[j].cand], h)) {
+        fixed[j] = true;
+        if (*a == list[j].alpha) continue;
+        list[j].alpha = *a;
+        list[j].half_width = h;
+        const auto all = sum_of(list, list.size(), fit);
+        auto at = fit_default_method(prep, &all, nullptr, &fit);
+        ++st.evaluations;
+        if (at.available && at.has_likelihood) fit = std::move(at);
+      }
+    }
     for (int sweep = 0; sweep < 3; ++sweep) {
       double moved = 0.0;
       for (std::size_t j = 0; j < list.size(); ++j) {
+        if (fixed[j]) continue;
         const auto others = sum_of(list, j, fit);
         const double a0 = list[j].alpha, step = 0.5 * std::max(std::fabs(a0), 0.2);
         const auto& c = cands[list[j].cand];
@@ -688,6 +723,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       af.alpha = acc_list[j].alpha;
       af.fit = cur;
       set_amplitude(af, cands[acc_list[j].cand], acc_list[j].half_width);
+      double h = 0.0;
+      if (sensor_amplitude(cands[acc_list[j].cand], h) && af.params.size() == 1) {
+        af.source = "force sensor";
+        af.params[0].est = {prep.sensor_delay.tau_s, prep.sensor_delay.lo_s, prep.sensor_delay.hi_s};  // its bootstrap interval
+      }
     }
     if (progress) progress("likelihood check: accepted " + w.id);
     st.rounds.push_back(std::move(rd));
@@ -742,7 +782,8 @@ std::string likelihood_text(const LikelihoodStage& s) {
     for (std::size_t a = 0; a < s.accepted.size(); ++a) o << (a ? ", then " : " ") << s.accepted[a];
     o << "; NLL " << g4(s.nll_baseline) << " -> " << g4(s.nll_final) << " (" << s.evaluations << " fits of the default method)\n";
     o << "  named parameters (amplitudes refitted jointly; [95 % profile-likelihood interval, the others fixed]):\n";
-    for (const auto& f : s.accepted_fits) o << "    " << f.id << ":" << params_text(f.params) << "\n";
+    for (const auto& f : s.accepted_fits)
+      o << "    " << f.id << ":" << params_text(f.params) << (f.source.empty() ? "" : "  (read from the " + f.source + "; […]: 95 % bootstrap over trials)") << "\n";
     const auto z = s.impedance();
     o << "  corrected estimate (" << s.fit.method << " with the extension): D [" << g4(z.d(0, 0)) << " " << g4(z.d(0, 1)) << "; " << g4(z.d(1, 0)) << " "
       << g4(z.d(1, 1)) << "] N s/m, K [" << g4(z.k(0, 0)) << " " << g4(z.k(0, 1)) << "; " << g4(z.k(1, 0)) << " " << g4(z.k(1, 1)) << "] N/m\n";
@@ -782,7 +823,11 @@ nlohmann::json likelihood_json(const LikelihoodStage& s) {
   // The named mechanisms' parameters at the joint refit (the rounds keep
   // what each round saw).
   j["named_params"] = nlohmann::json::object();
-  for (const auto& f : s.accepted_fits) j["named_params"][f.id] = params_json(f.params);
+  j["named_params_source"] = nlohmann::json::object();
+  for (const auto& f : s.accepted_fits) {
+    j["named_params"][f.id] = params_json(f.params);
+    j["named_params_source"][f.id] = f.source.empty() ? "likelihood" : f.source;
+  }
   if (s.misfit_found()) {
     const auto z = s.impedance();
     j["corrected"] = {{"method", s.fit.method},
@@ -830,7 +875,10 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
   if (s.available) {
     c.decided_by = "likelihood";
     c.named = s.accepted;
-    for (const auto& f : s.accepted_fits) c.named_params.push_back(f.params);
+    for (const auto& f : s.accepted_fits) {
+      c.named_params.push_back(f.params);
+      c.named_sources.push_back(f.source);
+    }
     if (s.misfit_found()) {
       c.has_corrected = true;
       c.corrected = s.impedance();
@@ -926,8 +974,13 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
   if (dg.accepted.empty()) o << " none";
   for (const auto& a : dg.accepted) o << " " << a;
   o << ")\n";
-  for (std::size_t i = 0; i < c.named_params.size() && i < c.named.size(); ++i) o << "  " << c.named[i] << ":" << params_text(c.named_params[i]) << "\n";
-  if (!c.named_params.empty()) o << "  ([…]: 95 % profile-likelihood interval of the amplitude, the other named amplitudes fixed)\n";
+  bool profiled = false;
+  for (std::size_t i = 0; i < c.named_params.size() && i < c.named.size(); ++i) {
+    const std::string src = i < c.named_sources.size() ? c.named_sources[i] : std::string();
+    profiled = profiled || src.empty();
+    o << "  " << c.named[i] << ":" << params_text(c.named_params[i]) << (src.empty() ? "" : "  (read from the " + src + "; […]: 95 % bootstrap over trials)") << "\n";
+  }
+  if (profiled) o << "  ([…]: 95 % profile-likelihood interval of the amplitude, the other named amplitudes fixed)\n";
   if (c.has_corrected)
     o << "  corrected impedance: D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; " << g4(c.corrected.d(1, 0)) << " "
       << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " " << g4(c.corrected.k(0, 1)) << "; " << g4(c.corrected.k(1, 0)) << " "
@@ -942,7 +995,12 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
 nlohmann::json conclusion_json(const Conclusion& c) {
   nlohmann::json j = {{"decided_by", c.decided_by}, {"named", c.named}, {"misfit", !c.named.empty()}};
   j["named_params"] = nlohmann::json::object();
-  for (std::size_t i = 0; i < c.named_params.size() && i < c.named.size(); ++i) j["named_params"][c.named[i]] = params_json(c.named_params[i]);
+  j["named_params_source"] = nlohmann::json::object();
+  for (std::size_t i = 0; i < c.named_params.size() && i < c.named.size(); ++i) {
+    j["named_params"][c.named[i]] = params_json(c.named_params[i]);
+    const std::string src = i < c.named_sources.size() ? c.named_sources[i] : std::string();
+    j["named_params_source"][c.named[i]] = src.empty() ? c.decided_by : src;
+  }
   j["alternatives"] = nlohmann::json::array();
   for (const auto& a : c.alternatives)
     j["alternatives"].push_back({{"for", a.named}, {"id", a.id}, {"gain", a.gain}, {"delay_s", a.delay_s}, {"why", a.why}});

@@ -354,6 +354,7 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
                      " (of " + std::to_string(out.n_perturbed) + " perturbed): the " + std::to_string(folds) +
                      "-fold cross-validation over trials needs at least " + std::to_string(folds) +
                      " (e.g. manip_sim --movements 100 gives 24)");
+  out.sensor_delay = sensor_delay(d);
   if (opt.pem_baseline) out.pem = fit_default_method(out);
   if (out.pem.available) {
     d.planar_ref_d = out.pem.d;
@@ -1479,7 +1480,7 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
     jr[n] = v;
   }
   o << "\n  (apparatus mechanisms between the logged force and the handle make the two routes disagree; person-side ones do not)\n";
-  const auto sdl = sensor_delay(prep.data);
+  const auto& sdl = prep.sensor_delay;
   nlohmann::json jd = {{"available", sdl.available}};
   if (sdl.available) {
     o << "  actuation delay read from the force sensor: " << g4(1e3 * sdl.tau_s) << " ms [" << g4(1e3 * sdl.lo_s) << ", " << g4(1e3 * sdl.hi_s)

@@ -334,6 +334,7 @@ TEST_CASE("manipulandum: sanitizer-sized session: a named delay through its held
   REQUIRE(f);
   CHECK(f->fold_gain_nats.size() == 3);
   check_main_param(c.effects.front(), o);  // the delay within 20 %, a positive held-out gain
+  CHECK(f->source == "force sensor");       // its correction takes the sensor's reading (sensor_delay.hpp)
   REQUIRE(o.concl.has_corrected);
   CHECK(o.concl.corrected.k.allFinite());
   CHECK(o.concl.corrected.d.allFinite());
@@ -388,7 +389,9 @@ TEST_CASE("manipulandum: hidden stage friction 1 N is named, F within 20 %, D an
 // which then held part of it (seeds 5000-5009: the delay 3-18 % short, D
 // within 20 % in 1/10); the joint refit of the accepted amplitudes
 // (likelihood_stage.cpp, refit_jointly) gives seed 1 F 0.94 N, delay 2.08 ms,
-// D within 15 %, K within 3 % (Frobenius, apparent truth).
+// D within 15 %, K within 3 % (Frobenius, apparent truth). Since 2026-12-06
+// the delay is read from the force sensor and the friction refitted beside
+// it (docs/diagnosis.md, "Actuation delay from the force sensor").
 TEST_CASE("manipulandum: hidden delay 2 ms + friction 1 N are both named, each within 20 %, D and K after the joint refit") {
   Case c;
   c.effects = {sim::parse_hidden_effect("delay:0.002"), sim::parse_hidden_effect("friction:1")};
@@ -410,6 +413,11 @@ TEST_CASE("manipulandum: hidden delay 2 ms + friction 1 N are both named, each w
     CHECK(hi > v);
     CHECK(hi - lo < 0.5 * std::fabs(v));  // informative: narrower than ±25 %
   }
+  // The delay read from the force sensor (its bootstrap interval above), the
+  // friction's amplitude profiled beside it.
+  const auto jc = conclusion_json(o.concl);
+  CHECK(jc["named_params_source"]["actuation_delay"] == "force sensor");
+  CHECK(jc["named_params_source"]["stage_friction"] == "likelihood");
   REQUIRE(o.concl.has_corrected);
   const auto& z = o.concl.corrected;
   INFO("K after " << show(z.k) << " truth " << show(o.k_app) << "; D after " << show(z.d) << " truth " << show(o.d_app));

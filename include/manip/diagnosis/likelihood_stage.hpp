@@ -98,6 +98,11 @@ struct LikelihoodCandidate {
   // α (stats::profile_interval; for accepted candidates after the joint
   // refit, each amplitude's profile with the others fixed).
   std::vector<ParamEstimate> params;
+  // Where an accepted candidate's parameters come from when not from its
+  // amplitude profile: "force sensor" for a named actuation delay whose
+  // sensor reading is usable (then params hold that reading and its
+  // bootstrap interval; sensor_delay.hpp).
+  std::string source;
   PemBaseline fit;                    // default method at the optimum (accepted ones included)
   // Accepted candidates only: cross-validation over trials (folds of
   // neighbouring trials, as the equation-error search): per fold, both models
@@ -167,6 +172,7 @@ struct Conclusion {
   // profile-likelihood intervals; the equation-error search: empty, its
   // bootstrap intervals are in its own section).
   std::vector<std::vector<ParamEstimate>> named_params;
+  std::vector<std::string> named_sources;  // per named mechanism: "" (as above) or LikelihoodCandidate::source
   bool has_corrected = false;
   PlanarImpedance corrected;
   std::vector<Alternative> alternatives;

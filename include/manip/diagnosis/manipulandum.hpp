@@ -27,6 +27,7 @@
 
 #include "manip/diagnosis/engine.hpp"
 #include "manip/diagnosis/mechanisms.hpp"
+#include "manip/diagnosis/sensor_delay.hpp"
 #include "manip/estimation/settings.hpp"
 #include "manip/estimation/trial_data.hpp"
 #include "manip/logging/session_stream.hpp"
@@ -143,6 +144,9 @@ struct PlanarPrepared {
   PemBaseline pem;          // default method, no extension
   PemBaseline pem_extended; // default method refitted with the accepted extension (filled by the app/tests)
   RefinedExtension refined; // ... with its amplitude refined by the likelihood (filled by the app/tests)
+  // The actuation delay read from the force sensor (sensor_delay.hpp); the
+  // likelihood check's correction of a named delay takes it (likelihood_stage.hpp).
+  SensorDelay sensor_delay;
   double t_est_s = 0.0;
   int sg_window = 0;
 };

@@ -24,6 +24,9 @@
 // level (0.01 ms at M_adm 20 kg). The fit used before (e against
 // u(t) − u(t − τ) without I, b Δẍ and an offset) left 48 % of a clean
 // session's disagreement unexplained and put τ 0.05-0.1 ms low.
+// A named actuation delay's correction takes this τ (likelihood_stage.cpp,
+// refit_jointly): the kinematic likelihood's own delay scatters by ±0.3 ms,
+// and D moves 10-16 % per 0.1 ms of it.
 #include <cstdint>
 #include <string>
 
