@@ -170,7 +170,7 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   // some of anything, and on sessions without friction it would take a
   // share of the delay's.
   std::vector<double> coarse;
-  for (double t = -0.001; t <= kSensorDelayMaxS + 1e-12; t += 0.0001) coarse.push_back(t);
+  for (int i = -10; i <= static_cast<int>(std::lround(kSensorDelayMaxS / 1e-4)); ++i) coarse.push_back(1e-4 * i);
   std::vector<std::vector<TrialStats>> st_coarse(coarse.size());
   for (std::size_t i = 0; i < coarse.size(); ++i) st_coarse[i] = stats_at(segs, n_trials, n_z, coarse[i], dt);
   std::vector<int> cols = {0};
