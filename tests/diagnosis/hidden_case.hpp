@@ -54,30 +54,50 @@ struct Case {
   std::vector<std::string> mechanisms{};  // the library's mechanisms (PlanarOptions::mechanisms; empty: all)
 };
 
-inline Outcome run_case(const Case& c) {
+// The case's session as diagnose_model reads it: simulated into the
+// diagnosis' LogCollector (truth channels dropped), with what was drawn and
+// the person before the draw's impedance scale.
+struct Collected {
+  std::vector<CollectedSession> ses;
+  sim::HiddenDraw draw;
+  sim::SessionRunSummary sum;
+  sim::LinearHumanParams person;
+};
+
+inline Collected collect_case(const Case& c) {
   sim::SessionDesign base;
   base.n_movements = c.movements;
   base.reps_per_angle = c.reps;
   base.session.source = "manip_sim/linear";
   if (c.pulse_s > 0) base.session.perturbation.duration_s = c.pulse_s;
   if (c.pulse_n > 0) base.session.perturbation.amplitude_n = c.pulse_n;
-  auto person = sim::table1_person();
-  sim::apply_noise(c.noise, base, person);
-  auto hs = sim::make_hidden_session(base, person, c.effects, c.hidden_seed);
-  std::vector<CollectedSession> ses(1);
-  ses[0].name = "hidden";
-  LogCollector col(ses[0]);
-  const auto sum = sim::run_session(hs.design, *hs.person, col);
+  Collected out;
+  out.person = sim::table1_person();
+  sim::apply_noise(c.noise, base, out.person);
+  auto hs = sim::make_hidden_session(base, out.person, c.effects, c.hidden_seed);
+  out.ses.resize(1);
+  out.ses[0].name = "hidden";
+  LogCollector col(out.ses[0]);
+  out.sum = sim::run_session(hs.design, *hs.person, col);
   col.finish();
+  out.draw = hs.draw;
+  return out;
+}
+
+inline Outcome run_case(const Case& c) {
+  auto cc = collect_case(c);
+  auto& ses = cc.ses;
+  const auto& sum = cc.sum;
+  const auto& person = cc.person;
   Outcome o;
-  o.draw = hs.draw;
+  o.draw = cc.draw;
   o.perturbed = sum.perturbed;
   if (sum.apparent) {
     o.d_app = sum.apparent->d_nspm;
     o.k_app = sum.apparent->k_npm;
   }
-  o.d_intr = person.d_nspm * hs.draw.impedance_scale;
-  o.k_intr = person.k_npm * hs.draw.impedance_scale;
+  o.d_intr = person.d_nspm * cc.draw.impedance_scale;
+  o.k_intr = person.k_npm * cc.draw.impedance_scale;
   PlanarOptions po;
   if (const char* ord = std::getenv("MANIP_MSTUDY_ORDER")) po.nuisance_order = std::atoi(ord);
   po.directional_reflex = c.directional;

@@ -4,10 +4,9 @@
 #include <cmath>
 #include <vector>
 
+#include "hidden_case.hpp"
 #include "manip/diagnosis/manipulandum.hpp"
 #include "manip/diagnosis/sensor_delay.hpp"
-#include "manip/sim/hidden_effects.hpp"
-#include "manip/sim/presets.hpp"
 
 #include <catch2/catch.hpp>
 
@@ -19,23 +18,17 @@ struct Run {
   int perturbed = 0;
 };
 
-Run sensor_delay_of(const std::vector<sim::HiddenEffect>& effects, sim::NoiseLevel noise, std::uint64_t hidden_seed, int movements = 60) {
-  sim::SessionDesign base;
-  base.n_movements = movements;
-  base.reps_per_angle = 3;
-  base.session.source = "manip_sim/linear";
-  auto person = sim::table1_person();
-  sim::apply_noise(noise, base, person);
-  auto hs = sim::make_hidden_session(base, person, effects, hidden_seed);
-  std::vector<CollectedSession> ses(1);
-  ses[0].name = "hidden";
-  LogCollector col(ses[0]);
-  const auto sum = sim::run_session(hs.design, *hs.person, col);
-  col.finish();
+Run sensor_delay_of(const std::vector<sim::HiddenEffect>& effects, sim::NoiseLevel noise, std::uint64_t hidden_seed) {
+  testing::Case c;
+  c.effects = effects;
+  c.noise = noise;
+  c.hidden_seed = hidden_seed;
+  c.movements = 60;
+  auto cc = testing::collect_case(c);
   PlanarOptions po;
   po.pem_baseline = false;  // the sensor route needs the isolated signals only
-  const auto prep = prepare_planar(ses, po, 10);
-  return {sensor_delay(prep.data, 100, 1), sum.perturbed};
+  const auto prep = prepare_planar(cc.ses, po, 10);
+  return {sensor_delay(prep.data, 100, 1), cc.sum.perturbed};
 }
 
 }  // namespace
