@@ -737,6 +737,13 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
   return st;
 }
 
+namespace {
+// A named parameter's source when not its amplitude profile (LikelihoodCandidate::source).
+std::string source_note(const std::string& source) {
+  return source.empty() ? std::string() : "  (read from the " + source + "; […]: 95 % bootstrap over trials)";
+}
+}  // namespace
+
 std::string likelihood_text(const LikelihoodStage& s) {
   std::ostringstream o;
   o << "\nLikelihood check (default method's likelihood of the raw positions; each candidate profiled in its amplitude,\n"
@@ -783,7 +790,7 @@ std::string likelihood_text(const LikelihoodStage& s) {
     o << "; NLL " << g4(s.nll_baseline) << " -> " << g4(s.nll_final) << " (" << s.evaluations << " fits of the default method)\n";
     o << "  named parameters (amplitudes refitted jointly; [95 % profile-likelihood interval, the others fixed]):\n";
     for (const auto& f : s.accepted_fits)
-      o << "    " << f.id << ":" << params_text(f.params) << (f.source.empty() ? "" : "  (read from the " + f.source + "; […]: 95 % bootstrap over trials)") << "\n";
+      o << "    " << f.id << ":" << params_text(f.params) << source_note(f.source) << "\n";
     const auto z = s.impedance();
     o << "  corrected estimate (" << s.fit.method << " with the extension): D [" << g4(z.d(0, 0)) << " " << g4(z.d(0, 1)) << "; " << g4(z.d(1, 0)) << " "
       << g4(z.d(1, 1)) << "] N s/m, K [" << g4(z.k(0, 0)) << " " << g4(z.k(0, 1)) << "; " << g4(z.k(1, 0)) << " " << g4(z.k(1, 1)) << "] N/m\n";
@@ -978,7 +985,7 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
   for (std::size_t i = 0; i < c.named_params.size() && i < c.named.size(); ++i) {
     const std::string src = i < c.named_sources.size() ? c.named_sources[i] : std::string();
     profiled = profiled || src.empty();
-    o << "  " << c.named[i] << ":" << params_text(c.named_params[i]) << (src.empty() ? "" : "  (read from the " + src + "; […]: 95 % bootstrap over trials)") << "\n";
+    o << "  " << c.named[i] << ":" << params_text(c.named_params[i]) << source_note(src) << "\n";
   }
   if (profiled) o << "  ([…]: 95 % profile-likelihood interval of the amplitude, the other named amplitudes fixed)\n";
   if (c.has_corrected)

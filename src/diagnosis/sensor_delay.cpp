@@ -8,6 +8,7 @@
 
 #include "manip/common/rng.hpp"
 #include "manip/diagnosis/manipulandum.hpp"
+#include "manip/diagnosis/stats.hpp"
 
 namespace manip::diagnosis {
 namespace {
@@ -87,8 +88,8 @@ double sse(const std::vector<TrialStats>& st, const std::vector<Eigen::MatrixXd>
   return yy - b.dot(zy);
 }
 
-// The minimum of f over an evenly spaced grid, refined by the parabola
-// through it and its neighbours (kept inside them).
+// The minimum of f over a grid, refined by the parabola through it and its
+// neighbours (kept inside them).
 template <class F>
 double grid_min(const std::vector<double>& grid, F&& f, double* best_value = nullptr) {
   std::vector<double> v(grid.size());
@@ -96,10 +97,8 @@ double grid_min(const std::vector<double>& grid, F&& f, double* best_value = nul
   const auto i = static_cast<std::size_t>(std::min_element(v.begin(), v.end()) - v.begin());
   if (best_value) *best_value = v[i];
   if (i == 0 || i + 1 == grid.size()) return grid[i];
-  const double den = v[i - 1] - 2 * v[i] + v[i + 1];
-  if (!(den > 0)) return grid[i];
-  const double h = grid[i + 1] - grid[i];
-  return grid[i] + std::clamp(0.5 * (v[i - 1] - v[i + 1]) / den, -1.0, 1.0) * h;
+  const double x = stats::parabola_vertex(grid[i - 1], v[i - 1], grid[i], v[i], grid[i + 1], v[i + 1]);
+  return std::isfinite(x) ? std::clamp(x, grid[i - 1], grid[i + 1]) : grid[i];
 }
 
 }  // namespace
@@ -114,7 +113,7 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   // The usable trials: isolated u_pert, a window, a sensor that moved.
   std::vector<Seg> segs;
   std::size_t n_trials = 0, n_fric = 0;
-  double force_ss = 0.0;
+  double force_ss = 0.0, ee = 0.0;  // ee: Σ of the projected disagreement²
   for (const auto& p : d.planar) {
     const std::size_t n = p.du_ext_adm.size();
     if (n < 8 || p.du_ext_force.size() != n || p.u_pert.size() != n || p.dxdd.size() != n || p.u_pert_iso.size() < n + p.u_pert_iso_pre)
@@ -133,12 +132,14 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
       s.q1 = t - s.q0 * s.q0.dot(t);
       s.q1 /= s.q1.norm();
       s.e_minus_u.resize(ni);
-      Eigen::VectorXd acc(ni);
+      Eigen::VectorXd acc(ni), e(ni);
       for (std::size_t k = 0; k < n; ++k) {
         const auto kk = static_cast<Eigen::Index>(k);
-        s.e_minus_u(kk) = p.du_ext_adm[k](a) - p.du_ext_force[k](a) - p.u_pert[k](a);
+        e(kk) = p.du_ext_adm[k](a) - p.du_ext_force[k](a);
+        s.e_minus_u(kk) = e(kk) - p.u_pert[k](a);
         acc(kk) = p.dxdd[k](a);
       }
+      ee += project(s, e).squaredNorm();
       s.z.push_back(project(s, acc));
       for (std::size_t j = 0; j < n_fric; ++j) {
         Eigen::VectorXd f = Eigen::VectorXd::Zero(ni);
@@ -177,21 +178,22 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   double best = 0.0, best_fric = std::numeric_limits<double>::infinity();
   (void)grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, cols, {}); }, &best);
   int fric = -1;
+  double t_fric = 0.0;
   for (std::size_t j = 0; j < n_fric; ++j) {
     const std::vector<int> with = {0, static_cast<int>(1 + j)};
     double v = 0.0;
-    (void)grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, with, {}); }, &v);
+    const double t = grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, with, {}); }, &v);
     if (v < best_fric) {
       best_fric = v;
       fric = static_cast<int>(j);
+      t_fric = t;
     }
   }
   if (fric >= 0 && best_fric < 0.9 * best) {
     // Friction dissipates: a negative force is the column fitting something else.
     const std::vector<int> with = {0, 1 + fric};
-    const double t = grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, with, {}); });
     Eigen::VectorXd c;
-    (void)sse(stats_at(segs, n_trials, n_z, t, dt), zz, with, {}, &c);
+    (void)sse(stats_at(segs, n_trials, n_z, t_fric, dt), zz, with, {}, &c);
     if (c(1) > 0.0) cols = with;
   }
   const double tau0 = grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, cols, {}); });
@@ -211,12 +213,6 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
     out.friction_n = coef(1);  // e = −I[f_fr] = F I[tanh(v / v_s)]
     if (n_fric == kStageFrictionVs.size()) out.friction_vs_mps = kStageFrictionVs[static_cast<std::size_t>(cols[1] - 1)];
   }
-  double ee = 0.0;
-  for (const auto& s : segs) {
-    Eigen::VectorXd e = s.e_minus_u;
-    for (Eigen::Index k = 0; k < e.size(); ++k) e(k) += s.p->u_pert[static_cast<std::size_t>(k)](s.axis);
-    ee += project(s, e).squaredNorm();
-  }
   out.explained_share = ee > 0 ? 1.0 - std::sqrt(std::max(0.0, rss) / ee) : 0.0;
   out.trials = static_cast<int>(n_trials);
 
@@ -232,15 +228,8 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   }
   out.bootstrap = bootstrap;
   if (!taus.empty()) {
-    std::sort(taus.begin(), taus.end());
-    auto q = [&](double p) {
-      const double x = p * static_cast<double>(taus.size() - 1);
-      const auto i = static_cast<std::size_t>(std::floor(x));
-      const std::size_t j = std::min(i + 1, taus.size() - 1);
-      return taus[i] + (x - static_cast<double>(i)) * (taus[j] - taus[i]);
-    };
-    out.lo_s = q(0.025);
-    out.hi_s = q(0.975);
+    out.lo_s = stats::percentile(taus, 2.5);
+    out.hi_s = stats::percentile(taus, 97.5);
   } else {
     out.lo_s = out.hi_s = out.tau_s;
   }
