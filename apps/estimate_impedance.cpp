@@ -98,7 +98,7 @@ int run(int argc, char** argv) {
   // Numbers are read as text and parsed here, so a bad value is refused with
   // the option named and its range (not CLI11's or std::stod's wording).
   std::string t_est, cutoff_thr, oe_pre, sg_window, oe_poly;
-  std::string k_model, force_source;
+  std::string k_model, force_source, position_source;
   bool estimate_m = false, no_jackknife = false, group = false;
   cli::Common c;
   cli::add_version(app, "estimate_impedance");
@@ -112,6 +112,9 @@ int run(int argc, char** argv) {
   app.add_option("--k-model", k_model, "symmetric (eq. 30) | full (8 parameters) for paper methods");
   app.add_flag("--estimate-m", estimate_m, "estimate M too (eq. 24-29) in paper methods instead of M_BSP");
   app.add_option("--force-source", force_source, "admittance (eq. 21) | sensor: Δu_ext for paper methods");
+  app.add_option("--position-source", position_source,
+                 "encoder (measured, default) | reference: the admittance's x_ref aligned to the encoder, for every method "
+                 "(exact in eq. 21 when the stages track it through a PD; docs/diagnosis.md, \"Tracking\")");
   app.add_option("--oe-pre", oe_pre, "output error: data before onset, [0, 0.5] s (default 0.05)");
   app.add_option("--oe-poly-order", oe_poly, "output error: per-trial polynomial order, [0, 8] (default 3)");
   app.add_flag("--no-jackknife", no_jackknife, "output error: least-squares SE instead of the jackknife over trials");
@@ -162,6 +165,11 @@ int run(int argc, char** argv) {
     if (force_source == "admittance") s.ls.force = ForceSource::admittance;
     else if (force_source == "sensor") s.ls.force = ForceSource::sensor;
     else throw manip::UsageError("--force-source " + force_source + ": expected admittance or sensor");
+  }
+  if (!position_source.empty()) {
+    if (position_source == "encoder") s.position = PositionSource::encoder;
+    else if (position_source == "reference") s.position = PositionSource::reference;
+    else throw manip::UsageError("--position-source " + position_source + ": expected encoder or reference");
   }
   if (given("--oe-pre")) s.oe.t_pre_s = number("--oe-pre", oe_pre, 0.0, 0.5, false, "[0, 0.5] s");
   if (given("--oe-poly-order")) s.oe.poly_order = integer("--oe-poly-order", oe_poly, 0, 8);

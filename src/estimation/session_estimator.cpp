@@ -85,11 +85,22 @@ void SessionEstimator::add_trial(const SessionInfo& info, TrialData&& t) {
   }
 }
 
-SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& t, const PipelineSettings& pipe,
+SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& trial, const PipelineSettings& pipe,
                                                      std::span<const double> jerk_x2) const {
   Prepared p;
-  p.trial = t.trial;
+  p.trial = trial.trial;
   try {
+    // Position "reference": every method sees the aligned admittance
+    // reference as x (trial_data.hpp); the x2 jerk computed for the PSD was
+    // the encoder's, so it is recomputed.
+    TrialData on_ref;
+    if (s_.position == PositionSource::reference) {
+      on_ref = trial;
+      p.reference_shift = reference_shift_for(info_.source);
+      on_ref.x_m = aligned_reference(trial, p.reference_shift);
+      jerk_x2 = {};
+    }
+    const TrialData& t = s_.position == PositionSource::reference ? on_ref : trial;
     const TwoLinkArm arm(info_.anthropometrics);
     const Vec2 x_on = t.x_m.at(static_cast<std::size_t>(t.onset_index));
     const auto m_bsp = arm.endpoint_inertia_at(x_on);
@@ -183,6 +194,8 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
     ow.push_back(std::move(p.ow));
     pw.push_back(std::move(p.pw));
     vw_trial.push_back(p.trial);
+    if (p.reference_shift == 0) ++rep.n_reference_shift0;
+    if (p.reference_shift == 1) ++rep.n_reference_shift1;
     if (p.has_truth) {
       truth.available = true;
       ++truth.n_trials;

@@ -19,6 +19,22 @@ std::int64_t sub_sat(std::int64_t a, std::int64_t b) {
 }
 }  // namespace
 
+int reference_shift_for(const std::string& source) { return source.rfind("manip_sim", 0) == 0 ? 0 : 1; }
+
+std::vector<Vec2> aligned_reference(const TrialData& t, int shift) {
+  const std::size_t n = t.x_m.size();
+  const auto name = "trial " + std::to_string(t.trial) + ": ";
+  if (t.x_ref_m.size() != n || n < 2) throw std::invalid_argument(name + "no admittance reference logged (x_ref) to use as the position");
+  for (const auto& v : t.x_ref_m)
+    if (!v.allFinite())
+      throw std::invalid_argument(name + "the admittance reference (x_ref) is not finite: this log has none to use as the position");
+  if (shift == 0) return t.x_ref_m;
+  std::vector<Vec2> out(n);
+  out[0] = 2.0 * t.x_ref_m[0] - t.x_ref_m[1];
+  for (std::size_t k = 1; k < n; ++k) out[k] = t.x_ref_m[k - 1];
+  return out;
+}
+
 SessionInfo session_info_from(const manip::session_t& m) {
   SessionInfo s = schema::from_message(m);
   if (const auto why = s.invalid_reason()) throw manip::InputError("session message: " + *why);

@@ -125,7 +125,8 @@ TEST_CASE("estimate_impedance bad-input matrix", "[cli][bad_input]") {
     for (const std::string bad : {"--cutoff abc", "--cutoff 2000", "--cutoff -1", "--cutoff 0", "--cutoff nan",
                                   "--sg-window 3", "--sg-window 8", "--sg-window -225", "--sg-window x",
                                   "--t-est nan", "--t-est -0.1", "--t-est 5", "--t-est 0.15s", "--cutoff-threshold-db inf",
-                                  "--oe-pre -1", "--oe-poly-order 99", "--k-model cubic", "--force-source none"}) {
+                                  "--oe-pre -1", "--oe-poly-order 99", "--k-model cubic", "--force-source none",
+                                  "--position-source stage"}) {
       INFO(bad);
       const auto r = run(good + opts + bad);
       CHECK(r.code == ec::kUsage);

@@ -44,6 +44,10 @@ TEST_CASE("settings: values are read, and t_est_s sets every method's window") {
   CHECK(s.oe.t_est_s == 0.1);
   CHECK(s.pem.t_est_s == 0.1);
   CHECK(s.pem.se == PemSe::fisher);
+  CHECK(s.position == PositionSource::encoder);
+  CHECK(load_estimator_settings(write("pos.yaml", "position_source: reference\n")).position == PositionSource::reference);
+  const auto bad_pos = write("bad_pos.yaml", "position_source: stage\n");
+  CHECK(config_error(bad_pos).find(bad_pos + ":1: position_source") == 0);
   CHECK(load_estimator_settings(write("all.yaml", "methods: [all]\n")).methods == all_methods());
 }
 

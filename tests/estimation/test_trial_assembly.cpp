@@ -5,7 +5,10 @@
 // recorded START/END events themselves (START cycle .. END cycle inclusive).
 #include <catch2/catch.hpp>
 
+#include <cmath>
+#include <limits>
 #include <map>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -170,4 +173,42 @@ TEST_CASE("trial assembly: estimate_log on a START-after-first-state log uses ev
   CHECK(r.n_perturbed == 8);
   CHECK(r.n_used == 8);
   CHECK(r.issues.empty());
+}
+
+// The admittance reference as the position (trial_data.hpp): manip_rt logs
+// the PD's set-point for the next sample, manip_sim the simulated handle at
+// t_k; aligned by the producer's convention, refused naming the trial when
+// the log has no finite reference.
+TEST_CASE("trial data: the admittance reference is aligned by its producer's convention, or refused naming the trial") {
+  using manip::Vec2;
+  CHECK(manip::estimation::reference_shift_for("manip_rt/sim") == 1);
+  CHECK(manip::estimation::reference_shift_for("manip_rt/can") == 1);
+  CHECK(manip::estimation::reference_shift_for("manip_sim/linear") == 0);
+  CHECK(manip::estimation::reference_shift_for("manip_sim/neuromech") == 0);
+  manip::estimation::TrialData t;
+  t.trial = 7;
+  const std::size_t n = 400;
+  const double dt = 2.5e-4;
+  auto path = [&](double time_s) { return Vec2(0.01 * std::sin(3.0 * time_s), 0.4 + 0.02 * time_s * time_s); };
+  for (std::size_t k = 0; k < n; ++k) {
+    const double ts = static_cast<double>(k) * dt;
+    t.x_m.push_back(path(ts));
+    t.x_ref_m.push_back(path(ts + dt));  // the set-point for the next sample
+  }
+  auto a = manip::estimation::aligned_reference(t, 1);
+  REQUIRE(a.size() == n);
+  for (std::size_t k = 1; k < n; ++k) CHECK(a[k] == t.x_ref_m[k - 1]);
+  CHECK((a[0] - path(0.0)).norm() < 1e-8);  // extrapolated linearly to the first sample (the path's curvature: 2.5 nm)
+  CHECK(manip::estimation::aligned_reference(t, 0) == t.x_ref_m);
+  // Imported logs carry no reference (NaN), or none at all.
+  t.x_ref_m[5].x() = std::numeric_limits<double>::quiet_NaN();
+  try {
+    (void)manip::estimation::aligned_reference(t, 1);
+    FAIL("a NaN reference was accepted");
+  } catch (const std::invalid_argument& e) {
+    CHECK(std::string(e.what()).find("trial 7: ") == 0);
+    CHECK(std::string(e.what()).find("x_ref") != std::string::npos);
+  }
+  t.x_ref_m.clear();
+  CHECK_THROWS_AS(manip::estimation::aligned_reference(t, 0), std::invalid_argument);
 }

@@ -58,6 +58,9 @@ struct Report {
   std::vector<TrialIssue> issues;
   std::vector<std::string> warnings;
   std::vector<VariationalWindow> windows;  // if keep_windows
+  // Position "reference" (EstimatorSettings::position): used trials whose
+  // logged x_ref was aligned by 0 and by 1 sample (aligned_reference).
+  int n_reference_shift0{0}, n_reference_shift1{0};
 };
 
 class SessionEstimator {
@@ -87,6 +90,7 @@ class SessionEstimator {
     bool has_truth{false};
     Mat2 truth_d{Mat2::Zero()}, truth_k{Mat2::Zero()}, truth_m{Mat2::Zero()};
     std::string truth_model;
+    int reference_shift{-1};  // position "reference": samples the logged x_ref was shifted by (0, 1)
   };
   // jerk_x2: the trial's x2 jerk if already computed (for the PSD), else empty.
   Prepared prepare(const TrialData& t, const PipelineSettings& pipe, std::span<const double> jerk_x2) const;

@@ -10,6 +10,7 @@
 #include "manip/estimation/methods/registry.hpp"
 #include "manip/estimation/output_error.hpp"
 #include "manip/estimation/pem.hpp"
+#include "manip/estimation/trial_data.hpp"
 #include "manip/estimation/variational.hpp"
 
 namespace manip::estimation {
@@ -28,6 +29,7 @@ struct EstimatorSettings {
   LsOptions ls{};
   OeSettings oe{};
   PemSettings pem{};
+  PositionSource position{PositionSource::encoder};  // the handle position every method sees (trial_data.hpp)
   std::vector<std::string> methods{default_method()};  // names in the method registry (methods/registry.hpp)
   bool keep_windows{false};  // keep variational windows for --export-signals / --plots
 };

@@ -49,6 +49,34 @@ struct TrialData {
   [[nodiscard]] std::size_t size() const { return x_m.size(); }
 };
 
+// Which logged signal is the handle position x for the estimator
+// (EstimatorSettings::position, `position_source` in the YAML,
+// --position-source). encoder: the measured position (the paper's). reference:
+// the admittance reference x_ref the controller integrated from the logged
+// force (eq. 20), aligned to the encoder's samples. On a rig whose stages
+// track the reference through a PD, eq. 21 holds exactly for the reference,
+// and only approximately for the encoder: the tracking error e = x_ref − x
+// enters Δu_ext as M_adm Δë + D_adm Δė (docs/diagnosis.md, "Tracking").
+enum class PositionSource { encoder, reference };
+
+// The samples by which a log's x_ref leads the encoder, from the log's
+// producer (session_t.source; lcmtypes/state_t.lcm): manip_sim and
+// make_hidden_session ("manip_sim…") log the simulated handle itself at t_k
+// (an ideal admittance): 0; a controller (manip_rt) logs the set-point for
+// the next sample, t_k + T (control/admittance.hpp): 1. Not from the data:
+// on simulated stages without friction, or with twice the PD's bandwidth,
+// the handle runs so close to that set-point that the logged x_ref(k) is
+// nearer x(k) than x_ref(k − 1) is, and the reference shifted by 0 put the
+// default method's D22 32-50 % off, by 1 within 3 % (docs/diagnosis.md,
+// "Tracking").
+int reference_shift_for(const std::string& source);
+
+// The reference aligned to the encoder's samples: x_ref(k − shift), the
+// first sample of a shifted series extrapolated linearly. Throws
+// std::invalid_argument naming the trial when its reference is missing or
+// not finite (imported logs carry none).
+std::vector<Vec2> aligned_reference(const TrialData& t, int shift);
+
 // The session-level truth of a simulated log: one MANIP_TRUTH_IMPEDANCE with
 // trial = -1 and model = "apparent" (docs/simulation.md, "Apparent-impedance
 // truth"): the constant D, K (M_BSP fixed as the estimator takes it) that best

@@ -32,6 +32,9 @@ std::string format_text(const Report& r, const std::string& log_name) {
   o << "  trials " << r.n_trials << ", perturbed " << r.n_perturbed << ", used " << r.n_used << "; SG window "
     << (r.sg_window > 0 ? std::to_string(r.sg_window) : std::string("n/a")) << ", high-pass " << fmt(r.cutoff_used_hz, 3) << " Hz"
     << (r.settings.cutoff_auto ? " (auto)" : "") << ", T_est " << r.settings.pipeline.t_est_s << " s\n";
+  if (r.settings.position == PositionSource::reference)
+    o << "  positions: the admittance reference x_ref, not the encoder (--position-source reference); aligned to the encoder by "
+      << "0 samples in " << r.n_reference_shift0 << " trials, 1 sample in " << r.n_reference_shift1 << "\n";
   if (r.psd.n_unperturbed > 0)
     o << "  PSD: unperturbed peak " << fmt(r.psd.peak_unperturbed_hz, 3) << " Hz; auto cut-off "
       << fmt(r.psd.cutoff_auto_hz, 3) << " Hz (ratio > " << r.settings.cutoff_auto_threshold_db
