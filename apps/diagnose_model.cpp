@@ -103,6 +103,11 @@ int run(int argc, char** argv) {
   double t_est = 0.15;
   app.add_flag("--no-default-method", no_pem, "manipulandum: do not fit the estimator's default method (pem) for comparison");
   app.add_option("--t-est", t_est, "manipulandum: estimation window after onset (s), as estimate_impedance")->check(CLI::Range(0.05, 1.0));
+  std::string position_source = "encoder";
+  app.add_option("--position-source", position_source,
+                 "manipulandum: the handle position, as estimate_impedance: encoder (default) | reference (the admittance's x_ref, "
+                 "aligned; the report's \"tracking\" line says when eq. 21 holds for it and not for the encoder)")
+      ->check(CLI::IsMember({"encoder", "reference"}));
   app.add_option("--json", json_out, "write the report as JSON to this file (an existing file is kept unless --force)");
   app.add_option("--plots", plots_dir,
                  "draw the figures (PNG + PDF; python -m manipplot.diagnosis, docs/diagnosis.md) into DIR, with diagnosis.json "
@@ -167,6 +172,7 @@ int run(int argc, char** argv) {
     }
     diagnosis::PlanarOptions po;
     po.estimator.pipeline.t_est_s = t_est;
+    if (position_source == "reference") po.estimator.position = estimation::PositionSource::reference;
     po.pem_baseline = !no_pem;
     po.nuisance_order = poly_order;
     po.directional_reflex = directional;

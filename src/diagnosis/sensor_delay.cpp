@@ -113,7 +113,7 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   // The usable trials: isolated u_pert, a window, a sensor that moved.
   std::vector<Seg> segs;
   std::size_t n_trials = 0, n_fric = 0;
-  double force_ss = 0.0, ee = 0.0;  // ee: Σ of the projected disagreement²
+  double force_ss = 0.0, ee = 0.0, track_ss = 0.0;  // ee: Σ of the projected disagreement²
   for (const auto& p : d.planar) {
     const std::size_t n = p.du_ext_adm.size();
     if (n < 8 || p.du_ext_force.size() != n || p.u_pert.size() != n || p.dxdd.size() != n || p.u_pert_iso.size() < n + p.u_pert_iso_pre)
@@ -147,6 +147,12 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
           for (std::size_t k = 0; k < n; ++k) f(static_cast<Eigen::Index>(k)) = p.friction_iso[j][k](a);
         s.z.push_back(project(s, f));
       }
+      Eigen::VectorXd trk = Eigen::VectorXd::Zero(ni);
+      if (p.tracking_iso.size() == n)
+        for (std::size_t k = 0; k < n; ++k) trk(static_cast<Eigen::Index>(k)) = p.tracking_iso[k](a);
+      trk = project(s, trk);
+      track_ss += trk.squaredNorm();
+      s.z.push_back(std::move(trk));
       segs.push_back(std::move(s));
     }
     ++n_trials;
@@ -159,7 +165,8 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
     out.why_not = "the force sensor reads a constant (no sensor, or not logged)";
     return out;
   }
-  const std::size_t n_z = 1 + n_fric;
+  const std::size_t n_z = 2 + n_fric;  // Δẍ, friction at each v_s, tracking
+  const int trk = static_cast<int>(1 + n_fric);
   std::vector<Eigen::MatrixXd> zz(n_trials, Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(n_z), static_cast<Eigen::Index>(n_z)));
   for (const auto& s : segs)
     for (std::size_t r = 0; r < n_z; ++r)
@@ -177,10 +184,23 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   std::vector<int> cols = {0};
   double best = 0.0, best_fric = std::numeric_limits<double>::infinity();
   (void)grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, cols, {}); }, &best);
+  // Tracking first: on a rig whose stages follow the reference through a PD
+  // it is most of the disagreement, with a coefficient of 1 (the header).
+  if (track_ss > 0.0) {
+    const std::vector<int> with = {0, trk};
+    double v = 0.0;
+    (void)grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, with, {}); }, &v);
+    if (v < 0.9 * best) {
+      out.tracking_share = 1.0 - std::sqrt(std::max(0.0, v) / best);
+      cols = with;
+      best = v;
+    }
+  }
   int fric = -1;
   double t_fric = 0.0;
   for (std::size_t j = 0; j < n_fric; ++j) {
-    const std::vector<int> with = {0, static_cast<int>(1 + j)};
+    std::vector<int> with = cols;
+    with.push_back(static_cast<int>(1 + j));
     double v = 0.0;
     const double t = grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, with, {}); }, &v);
     if (v < best_fric) {
@@ -191,10 +211,11 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   }
   if (fric >= 0 && best_fric < 0.9 * best) {
     // Friction dissipates: a negative force is the column fitting something else.
-    const std::vector<int> with = {0, 1 + fric};
+    std::vector<int> with = cols;
+    with.push_back(1 + fric);
     Eigen::VectorXd c;
     (void)sse(stats_at(segs, n_trials, n_z, t_fric, dt), zz, with, {}, &c);
-    if (c(1) > 0.0) cols = with;
+    if (c(c.size() - 1) > 0.0) cols = with;
   }
   const double tau0 = grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, cols, {}); });
 
@@ -209,9 +230,14 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   Eigen::VectorXd coef;
   const double rss = sse(st_opt, zz, cols, {}, &coef);
   out.mass_kg = coef(0);
-  if (cols.size() == 2) {
-    out.friction_n = coef(1);  // e = −I[f_fr] = F I[tanh(v / v_s)]
-    if (n_fric == kStageFrictionVs.size()) out.friction_vs_mps = kStageFrictionVs[static_cast<std::size_t>(cols[1] - 1)];
+  for (std::size_t j = 1; j < cols.size(); ++j) {
+    const auto c = static_cast<Eigen::Index>(j);
+    if (cols[j] == trk) {
+      out.tracking_coef = coef(c);
+    } else {
+      out.friction_n = coef(c);  // e = −I[f_fr] = F I[tanh(v / v_s)]
+      if (n_fric == kStageFrictionVs.size()) out.friction_vs_mps = kStageFrictionVs[static_cast<std::size_t>(cols[j] - 1)];
+    }
   }
   out.explained_share = ee > 0 ? 1.0 - std::sqrt(std::max(0.0, rss) / ee) : 0.0;
   out.trials = static_cast<int>(n_trials);

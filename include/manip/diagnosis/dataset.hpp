@@ -47,6 +47,15 @@ struct PlanarTrial {
   // first sample (sensor_delay.hpp: the actuation delay from the force sensor).
   std::vector<Eigen::Vector2d> u_pert_iso;
   std::size_t u_pert_iso_pre = 0;
+  // Tracking: the admittance reference x_ref (aligned to the encoder,
+  // estimation::aligned_reference) isolated as x is; tracking_iso is
+  // M_adm Δë + D_adm Δė with e = x_ref − x, by which eq. 21 on the encoder
+  // exceeds eq. 21 on the reference (sensor_delay.hpp); x_track is e itself
+  // over the window, as logged (not isolated: the isolation's integrations
+  // turn the force sensor's noise in x_ref into a drift). Empty: no finite
+  // reference in the log. reference_shift: 0 or 1 sample (-1: none).
+  std::vector<Eigen::Vector2d> tracking_iso, x_track;
+  int reference_shift = -1;
 };
 
 struct Segment {

@@ -180,6 +180,9 @@ struct Conclusion {
   // pulse of 100 ms or more a short-latency reflex is part of D, K within
   // the window unless named (docs/diagnosis.md, "Pulse").
   std::string protocol_note;
+  // The stages' tracking, when run_planar moved the diagnosis to the
+  // admittance reference (PlanarPrepared::tracking; empty otherwise).
+  std::string tracking_note;
 };
 [[nodiscard]] Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarPrepared& prep);
 [[nodiscard]] std::string conclusion_text(const Conclusion& c, const Diagnosis& dg);

@@ -129,6 +129,18 @@ struct RefinedExtension {
   int evaluations = 0;
   PemBaseline fit;  // the default method at α
 };
+// What the encoder route showed before the diagnosis moved to the reference.
+struct TrackingSwitch {
+  bool switched = false;
+  double share = 0.0, coef = 0.0;  // SensorDelay::tracking_share, tracking_coef on the encoder
+  double rms_um = 0.0;             // x_ref − x RMS over the windows (TrackingSummary)
+  int shift0 = 0, shift1 = 0;      // trials whose reference was aligned by 0 and by 1 sample
+  PemBaseline on_encoder;          // the default method on the encoder
+};
+// The rule: tracking takes at least this share of the disagreement, with a
+// coefficient within this distance of 1 (the header of sensor_delay.hpp).
+inline constexpr double kTrackingMinShare = 0.5, kTrackingCoefTolerance = 0.2;
+
 struct PlanarPrepared {
   Dataset data;
   // For the estimator's default method (through the method registry), per
@@ -147,9 +159,34 @@ struct PlanarPrepared {
   // The actuation delay read from the force sensor (sensor_delay.hpp); the
   // likelihood check's correction of a named delay takes it (likelihood_stage.hpp).
   SensorDelay sensor_delay;
+  // Tracking (docs/diagnosis.md, "Tracking"): set by run_planar when the
+  // stages' tracking of the admittance reference was most of eq. 21's
+  // disagreement with the sensor on the encoder, and everything here was
+  // then prepared with the reference as the position.
+  TrackingSwitch tracking;
   double t_est_s = 0.0;
   int sg_window = 0;
 };
+
+// prepare_planar, then, where the stages follow the admittance reference
+// through a PD (manip_rt), eq. 21 on the encoder carries M_adm Δë + D_adm Δė
+// of the tracking error e = x_ref − x into every fit: when that term takes
+// at least kTrackingMinShare of eq. 21's disagreement with the force sensor
+// with a coefficient within kTrackingCoefTolerance of 1 (SensorDelay), the
+// sessions are prepared again with the reference as the position (as
+// --position-source reference) and PlanarPrepared::tracking says what the
+// encoder showed (docs/diagnosis.md, "Tracking"). With opt.estimator.position
+// already reference, prepare_planar alone.
+[[nodiscard]] PlanarPrepared prepare_planar_tracked(std::vector<CollectedSession>& sessions, const PlanarOptions& opt, int folds,
+                                                    const std::function<void(const std::string&)>& progress = {});
+
+// Tracking over the used trials (PlanarTrial::x_track, reference_shift):
+// trials with a reference, how they were aligned, the RMS of x_ref − x over the windows.
+struct TrackingSummary {
+  int trials = 0, shift0 = 0, shift1 = 0;
+  double rms_um = 0.0;
+};
+[[nodiscard]] TrackingSummary tracking_summary(const PlanarPrepared& prep);
 
 [[nodiscard]] RefinedExtension refine_with_default_method(const PlanarPrepared& prep,
                                                           const std::vector<std::vector<Eigen::Vector2d>>& correction,

@@ -18,10 +18,22 @@
 // (its exact double integral), which to the smoothed kinematics lags the
 // logged samples by half a cycle.
 //
+// Where the stages follow the reference through a PD (manip_rt), eq. 21 on
+// the encoder exceeds eq. 21 on the reference x_ref, which the controller
+// integrated from f_s + u_pert, by M_adm Δë + D_adm Δė (e = x_ref − x):
+// PlanarTrial::tracking_iso, a column with a free coefficient (1 when the
+// routes differ by the tracking alone), taken like friction when it removes
+// more than a tenth of the residual (docs/diagnosis.md, "Tracking").
+//
 // Measured on simulated sessions (noise-free and realistic, hidden delay
 // 0-4 ms): the fit's residual is 3-4 % of the disagreement and τ sits
 // 0.03 ms below the hidden delay at every delay, integration step and noise
-// level (0.01 ms at M_adm 20 kg). The fit used before (e against
+// level (0.009 ms at M_adm 20 kg): the simulator's ideal admittance solves
+// plant and person together, so the person's inertia takes the share
+// (M_x + M_handle) / (M_adm + M_x + M_handle) of each held step at once, and
+// τ absorbs that share of half a cycle (with it modelled, |τ − truth| <
+// 0.001 ms; not kept, a controller integrates the previous reading). The
+// fit used before (e against
 // u(t) − u(t − τ) without I, b Δẍ and an offset) left 48 % of a clean
 // session's disagreement unexplained and put τ 0.05-0.1 ms low.
 // A named actuation delay's correction takes this τ (likelihood_stage.cpp,
@@ -37,6 +49,11 @@ namespace manip::diagnosis {
 // Samples of PlanarTrial::u_pert_iso before onset: the delays the fit can
 // shift I[u_pert] by (the actuation delay's 20 ms bound, and a margin).
 inline constexpr double kSensorDelayMaxS = 0.020;
+// The share of the disagreement the fit must explain for τ to be a reading
+// (reported as the rig's delay, taken by a named delay's correction): delay
+// sessions explain 93-99 %, clean ones ~65-85 %; manip_rt sessions without
+// the tracking term 8 % (docs/diagnosis.md, "Tracking").
+inline constexpr double kSensorDelayMinShare = 0.5;
 
 struct SensorDelay {
   bool available = false;
@@ -47,6 +64,11 @@ struct SensorDelay {
   double friction_n = 0.0;        // stage friction the sensor does not see (at friction_vs_mps; 0: not in the fit)
   double friction_vs_mps = 0.0;
   double explained_share = 0.0;   // 1 − RMS(residual) / RMS(disagreement), nuisance removed from both
+  // Tracking (PlanarTrial::tracking_iso) in the fit: its coefficient (1 when
+  // the routes differ by the stages' tracking alone) and the share of the
+  // residual it removed at the coarse optimum (0: not in the fit).
+  double tracking_coef = 0.0;
+  double tracking_share = 0.0;
   int trials = 0;
   int bootstrap = 0;
 };
