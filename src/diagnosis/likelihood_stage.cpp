@@ -975,13 +975,15 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
 
 std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
   std::ostringstream o;
+  const auto corrected = [&](const char* label) {
+    o << "  " << label << ": D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; " << g4(c.corrected.d(1, 0)) << " "
+      << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " " << g4(c.corrected.k(0, 1)) << "; "
+      << g4(c.corrected.k(1, 0)) << " " << g4(c.corrected.k(1, 1)) << "] N/m\n";
+  };
   o << "\nConclusion (decided by the " << (c.decided_by == "likelihood" ? "likelihood check" : "equation-error search") << "): ";
   if (!c.tracking_note.empty()) {
     o << "apparatus: " << c.tracking_note << "\n";
-    if (c.has_corrected && c.named.empty())
-      o << "  corrected impedance (on the reference): D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; "
-        << g4(c.corrected.d(1, 0)) << " " << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " "
-        << g4(c.corrected.k(0, 1)) << "; " << g4(c.corrected.k(1, 0)) << " " << g4(c.corrected.k(1, 1)) << "] N/m\n";
+    if (c.has_corrected && c.named.empty()) corrected("corrected impedance (on the reference)");
     o << "  On the reference: ";
   }
   if (c.named.empty()) {
@@ -1009,10 +1011,7 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
     o << "  " << c.named[i] << ":" << params_text(c.named_params[i]) << source_note(src) << "\n";
   }
   if (profiled) o << "  ([…]: 95 % profile-likelihood interval of the amplitude, the other named amplitudes fixed)\n";
-  if (c.has_corrected)
-    o << "  corrected impedance: D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; " << g4(c.corrected.d(1, 0)) << " "
-      << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " " << g4(c.corrected.k(0, 1)) << "; " << g4(c.corrected.k(1, 0)) << " "
-      << g4(c.corrected.k(1, 1)) << "] N/m\n";
+  if (c.has_corrected) corrected("corrected impedance");
   for (const auto& a : c.alternatives)
     o << "  or, for " << a.named << ": " << a.id << " of gain " << g4(a.gain) << " x the impedance at " << g4(a.delay_s * 1e3) << " ms (" << a.why
       << "; docs/diagnosis.md)\n";

@@ -1596,8 +1596,7 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
     o << "\n";
     jt.update({{"rms_um", sw.rms_um}, {"share", sw.share}, {"coef", sw.coef}, {"shift0_trials", sw.shift0}, {"shift1_trials", sw.shift1}});
     if (sw.on_encoder.available)
-      jt["on_encoder"] = {{"D_Nspm", {sw.on_encoder.d(0, 0), sw.on_encoder.d(0, 1), sw.on_encoder.d(1, 0), sw.on_encoder.d(1, 1)}},
-                          {"K_Npm", {sw.on_encoder.k(0, 0), sw.on_encoder.k(0, 1), sw.on_encoder.k(1, 0), sw.on_encoder.k(1, 1)}}};
+      jt["on_encoder"] = {{"D_Nspm", jmat(sw.on_encoder.d)}, {"K_Npm", jmat(sw.on_encoder.k)}};
   } else if (tr.trials == 0) {
     o << "  tracking: no admittance reference (x_ref) in the log\n";
   } else {
