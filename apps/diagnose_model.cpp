@@ -103,11 +103,12 @@ int run(int argc, char** argv) {
   double t_est = 0.15;
   app.add_flag("--no-default-method", no_pem, "manipulandum: do not fit the estimator's default method (pem) for comparison");
   app.add_option("--t-est", t_est, "manipulandum: estimation window after onset (s), as estimate_impedance")->check(CLI::Range(0.05, 1.0));
-  std::string position_source = "encoder";
+  std::string position_source = "auto";
   app.add_option("--position-source", position_source,
-                 "manipulandum: the handle position, as estimate_impedance: encoder (default) | reference (the admittance's x_ref, "
-                 "aligned; the report's \"tracking\" line says when eq. 21 holds for it and not for the encoder)")
-      ->check(CLI::IsMember({"encoder", "reference"}));
+                 "manipulandum: the handle position: auto (default: the encoder, moving to the admittance's x_ref when the "
+                 "stages' tracking is most of eq. 21's disagreement with the force sensor, the report's \"tracking\" line) | "
+                 "encoder (stays) | reference (x_ref aligned, from the start)")
+      ->check(CLI::IsMember({"auto", "encoder", "reference"}));
   app.add_option("--json", json_out, "write the report as JSON to this file (an existing file is kept unless --force)");
   app.add_option("--plots", plots_dir,
                  "draw the figures (PNG + PDF; python -m manipplot.diagnosis, docs/diagnosis.md) into DIR, with diagnosis.json "
@@ -172,7 +173,7 @@ int run(int argc, char** argv) {
     }
     diagnosis::PlanarOptions po;
     po.estimator.pipeline.t_est_s = t_est;
-    if (position_source == "reference") po.estimator.position = estimation::PositionSource::reference;
+    po.estimator.position = *estimation::parse_position_source(position_source);  // checked by CLI11 above
     po.pem_baseline = !no_pem;
     po.nuisance_order = poly_order;
     po.directional_reflex = directional;

@@ -113,8 +113,9 @@ int run(int argc, char** argv) {
   app.add_flag("--estimate-m", estimate_m, "estimate M too (eq. 24-29) in paper methods instead of M_BSP");
   app.add_option("--force-source", force_source, "admittance (eq. 21) | sensor: Δu_ext for paper methods");
   app.add_option("--position-source", position_source,
-                 "encoder (measured, default) | reference: the admittance's x_ref aligned to the encoder, for every method "
-                 "(exact in eq. 21 when the stages track it through a PD; docs/diagnosis.md, \"Tracking\")");
+                 "auto (default): the reference on manip_rt logs, the encoder otherwise | encoder (measured) | reference: the "
+                 "admittance's x_ref aligned to the encoder, for every method (exact in eq. 21 when the stages track it through "
+                 "a PD; docs/estimator.md, \"Which position\")");
   app.add_option("--oe-pre", oe_pre, "output error: data before onset, [0, 0.5] s (default 0.05)");
   app.add_option("--oe-poly-order", oe_poly, "output error: per-trial polynomial order, [0, 8] (default 3)");
   app.add_flag("--no-jackknife", no_jackknife, "output error: least-squares SE instead of the jackknife over trials");
@@ -167,9 +168,9 @@ int run(int argc, char** argv) {
     else throw manip::UsageError("--force-source " + force_source + ": expected admittance or sensor");
   }
   if (!position_source.empty()) {
-    if (position_source == "encoder") s.position = PositionSource::encoder;
-    else if (position_source == "reference") s.position = PositionSource::reference;
-    else throw manip::UsageError("--position-source " + position_source + ": expected encoder or reference");
+    const auto p = parse_position_source(position_source);
+    if (!p) throw manip::UsageError("--position-source " + position_source + ": expected auto, encoder or reference");
+    s.position = *p;
   }
   if (given("--oe-pre")) s.oe.t_pre_s = number("--oe-pre", oe_pre, 0.0, 0.5, false, "[0, 0.5] s");
   if (given("--oe-poly-order")) s.oe.poly_order = integer("--oe-poly-order", oe_poly, 0, 8);

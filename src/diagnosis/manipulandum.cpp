@@ -420,18 +420,23 @@ std::vector<estimation::OeWindow> corrected_pem_windows(const PlanarPrepared& pr
 PlanarPrepared prepare_planar_tracked(std::vector<CollectedSession>& sessions, const PlanarOptions& opt, int folds,
                                       const std::function<void(const std::string&)>& progress) {
   // prepare_planar consumes the sessions: keep them while the move is possible.
-  const bool may_move = opt.estimator.position == estimation::PositionSource::encoder;
+  // "auto" (the default) starts on the encoder and lets the data decide;
+  // an explicit encoder or reference stays where it is.
+  const bool may_move = opt.estimator.position == estimation::PositionSource::automatic;
   std::vector<CollectedSession> kept;
   if (may_move) kept = sessions;
   PlanarPrepared prep = prepare_planar(sessions, opt, folds);
   const auto& sd = prep.sensor_delay;
   if (!may_move || !sd.available || !(sd.tracking_share >= kTrackingMinShare) ||
-      !(std::fabs(sd.tracking_coef - 1.0) <= kTrackingCoefTolerance))
+      !(std::fabs(sd.tracking_coef - 1.0) <= kTrackingCoefTolerance) || !(sd.tracking_heldout_share > 0.0))
     return prep;
   TrackingSwitch sw;
   sw.switched = true;
   sw.share = sd.tracking_share;
   sw.coef = sd.tracking_coef;
+  sw.heldout_share = sd.tracking_heldout_share;
+  sw.heldout_better = sd.tracking_heldout_better;
+  sw.trials = sd.trials;
   const auto ts = tracking_summary(prep);
   sw.rms_um = ts.rms_um;
   sw.shift0 = ts.shift0;
@@ -1590,11 +1595,15 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
     o << "  tracking: on the encoder the admittance reference and the encoder differed by " << g4(sw.rms_um)
       << " um RMS over the windows (x_ref aligned by 1 sample in " << sw.shift1 << " trials, 0 in " << sw.shift0
       << "), and M_adm Δë + D_adm Δė (e = x_ref − x) took " << g4(100 * sw.share) << " % of this disagreement, coefficient "
-      << g4(sw.coef) << " (1: the routes differ by the stages' tracking alone). Eq. 21 holds for the reference, not the "
+      << g4(sw.coef) << " (1: the routes differ by the stages' tracking alone), " << g4(100 * sw.heldout_share)
+      << " % on held-out trials (lower in " << sw.heldout_better << " of " << sw.trials
+      << " left out). Eq. 21 holds for the reference, not the "
       << "encoder: everything in this report is on the reference (as --position-source reference)";
     if (sw.on_encoder.available) o << "; on the encoder the default method gave D " << mat(sw.on_encoder.d) << "  K " << mat(sw.on_encoder.k);
     o << "\n";
-    jt.update({{"rms_um", sw.rms_um}, {"share", sw.share}, {"coef", sw.coef}, {"shift0_trials", sw.shift0}, {"shift1_trials", sw.shift1}});
+    jt.update({{"rms_um", sw.rms_um}, {"share", sw.share}, {"coef", sw.coef}, {"heldout_share", sw.heldout_share},
+               {"heldout_better_trials", sw.heldout_better}, {"trials", sw.trials}, {"shift0_trials", sw.shift0},
+               {"shift1_trials", sw.shift1}});
     if (sw.on_encoder.available)
       jt["on_encoder"] = {{"D_Nspm", jmat(sw.on_encoder.d)}, {"K_Npm", jmat(sw.on_encoder.k)}};
   } else if (tr.trials == 0) {
@@ -1602,10 +1611,14 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
   } else {
     o << "  tracking: the admittance reference and the encoder differ by " << g4(tr.rms_um) << " um RMS over the windows (x_ref aligned by 1 sample in "
       << tr.shift1 << " trials, 0 in " << tr.shift0 << ")";
-    jt.update({{"rms_um", tr.rms_um}, {"shift0_trials", tr.shift0}, {"shift1_trials", tr.shift1}, {"share", sdl.tracking_share}, {"coef", sdl.tracking_coef}});
+    jt.update({{"rms_um", tr.rms_um}, {"shift0_trials", tr.shift0}, {"shift1_trials", tr.shift1}, {"share", sdl.tracking_share},
+               {"coef", sdl.tracking_coef}, {"heldout_share", sdl.tracking_heldout_share}});
     if (sdl.available && sdl.tracking_share > 0.0)
       o << "; M_adm Δë + D_adm Δė (e = x_ref − x) takes " << g4(100 * sdl.tracking_share) << " % of the disagreement, coefficient "
-        << g4(sdl.tracking_coef) << ": too little, or too far from 1, for the diagnosis to move to the reference\n";
+        << g4(sdl.tracking_coef) << ", " << g4(100 * sdl.tracking_heldout_share) << " % held out: "
+        << (prep.settings.position == estimation::PositionSource::automatic
+                ? "too little, too far from 1 or not held out, for the diagnosis to move to the reference\n"
+                : "the diagnosis stays where --position-source put it\n");
     else
       o << ": not part of the disagreement\n";
   }

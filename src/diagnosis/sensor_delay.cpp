@@ -241,6 +241,38 @@ SensorDelay sensor_delay(const Dataset& d, int bootstrap, std::uint64_t seed) {
   }
   out.explained_share = ee > 0 ? 1.0 - std::sqrt(std::max(0.0, rss) / ee) : 0.0;
   out.trials = static_cast<int>(n_trials);
+  if (out.tracking_share > 0.0) {
+    // Held out: the coefficients from the other trials, the residual of the
+    // trial left out, y − Z b: yy − 2 bᵀzy + bᵀ zz b over its segments; each
+    // model at its own τ (the fit without the column at its optimum).
+    std::vector<int> without;
+    for (const int c : cols)
+      if (c != trk) without.push_back(c);
+    const double tau_without = grid_min(coarse, [&](std::size_t i) { return sse(st_coarse[i], zz, without, {}); });
+    const auto st_without = stats_at(segs, n_trials, n_z, tau_without, dt);
+    auto heldout = [&](const std::vector<TrialStats>& st, const std::vector<int>& use, std::size_t i) {
+      std::vector<double> w(n_trials, 1.0);
+      w[i] = 0.0;
+      Eigen::VectorXd b;
+      (void)sse(st, zz, use, w, &b);
+      const auto m = static_cast<Eigen::Index>(use.size());
+      double r = st[i].yy;
+      for (Eigen::Index a = 0; a < m; ++a) {
+        r -= 2.0 * b(a) * st[i].zy(use[static_cast<std::size_t>(a)]);
+        for (Eigen::Index c = 0; c < m; ++c)
+          r += b(a) * b(c) * zz[i](use[static_cast<std::size_t>(a)], use[static_cast<std::size_t>(c)]);
+      }
+      return r;
+    };
+    double ss_with = 0.0, ss_without = 0.0;
+    for (std::size_t i = 0; i < n_trials; ++i) {
+      const double a = heldout(st_opt, cols, i), b = heldout(st_without, without, i);
+      ss_with += a;
+      ss_without += b;
+      if (a < b) ++out.tracking_heldout_better;
+    }
+    out.tracking_heldout_share = ss_without > 0 ? 1.0 - std::sqrt(std::max(0.0, ss_with) / ss_without) : 0.0;
+  }
 
   // Bootstrap over trials on the fine grid (a replicate's optimum at the
   // grid's edge is kept there: the interval then says "at least this wide").

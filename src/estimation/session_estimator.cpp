@@ -93,14 +93,26 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& trial, con
     // Position "reference": every method sees the aligned admittance
     // reference as x (trial_data.hpp); the x2 jerk computed for the PSD was
     // the encoder's, so it is recomputed.
+    std::optional<std::vector<Vec2>> x_ref;
+    const int shift = reference_shift_for(info_.source);
+    if (resolved_position(s_.position, info_.source) == PositionSource::reference) {
+      try {
+        x_ref = aligned_reference(trial, shift);
+      } catch (const std::invalid_argument&) {
+        // "auto" keeps the trial on the encoder (the paper's position); an
+        // explicit "reference" excludes it with the reason.
+        if (s_.position != PositionSource::automatic) throw;
+        p.reference_fallback = true;
+      }
+    }
     TrialData on_ref;
-    if (s_.position == PositionSource::reference) {
+    if (x_ref) {
       on_ref = trial;
-      p.reference_shift = reference_shift_for(info_.source);
-      on_ref.x_m = aligned_reference(trial, p.reference_shift);
+      on_ref.x_m = std::move(*x_ref);
+      p.reference_shift = shift;
       jerk_x2 = {};
     }
-    const TrialData& t = s_.position == PositionSource::reference ? on_ref : trial;
+    const TrialData& t = x_ref ? on_ref : trial;
     const TwoLinkArm arm(info_.anthropometrics);
     const Vec2 x_on = t.x_m.at(static_cast<std::size_t>(t.onset_index));
     const auto m_bsp = arm.endpoint_inertia_at(x_on);
@@ -129,6 +141,7 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
   rep.info = info_;
   rep.truth.apparent = apparent_;
   rep.settings = s_;
+  rep.position_used = resolved_position(s_.position, info_.source);
   rep.issues = std::move(issues);
   rep.warnings = std::move(warnings);
   rep.n_trials = n_trials_;
@@ -196,6 +209,7 @@ Report SessionEstimator::finish(std::vector<TrialIssue> issues, std::vector<std:
     vw_trial.push_back(p.trial);
     if (p.reference_shift == 0) ++rep.n_reference_shift0;
     if (p.reference_shift == 1) ++rep.n_reference_shift1;
+    if (p.reference_fallback) rep.reference_fallback_trials.push_back(p.trial);
     if (p.has_truth) {
       truth.available = true;
       ++truth.n_trials;

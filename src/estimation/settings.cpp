@@ -50,7 +50,7 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
   if (y.has("force_source"))
     s.ls.force = y.choice("force_source", {"admittance", "sensor"}) == "admittance" ? ForceSource::admittance : ForceSource::sensor;
   if (y.has("position_source"))
-    s.position = y.choice("position_source", {"encoder", "reference"}) == "encoder" ? PositionSource::encoder : PositionSource::reference;
+    s.position = *parse_position_source(y.choice("position_source", {"encoder", "reference", "auto"}));
   if (y.has("oe_t_pre_s"))
     s.oe.t_pre_s = y.number("oe_t_pre_s", [](double v) { return v >= 0 && v <= 0.5; }, "must be in [0, 0.5] s");
   if (y.has("oe_poly_order")) s.oe.poly_order = static_cast<int>(y.integer("oe_poly_order", 0, 8));
@@ -86,7 +86,7 @@ nlohmann::json settings_to_json(const EstimatorSettings& s) {
           {"k_model", s.ls.k_model == StiffnessModel::symmetric ? "symmetric" : "full"},
           {"estimate_m", s.ls.estimate_m},
           {"force_source", s.ls.force == ForceSource::admittance ? "admittance" : "sensor"},
-          {"position_source", s.position == PositionSource::encoder ? "encoder" : "reference"},
+          {"position_source", to_string(s.position)},
           {"oe_t_pre_s", s.oe.t_pre_s},
           {"oe_t_est_s", s.oe.t_est_s},
           {"oe_poly_order", s.oe.poly_order},

@@ -21,6 +21,26 @@ std::int64_t sub_sat(std::int64_t a, std::int64_t b) {
 
 int reference_shift_for(const std::string& source) { return source.rfind("manip_sim", 0) == 0 ? 0 : 1; }
 
+const char* to_string(PositionSource p) {
+  switch (p) {
+    case PositionSource::encoder: return "encoder";
+    case PositionSource::reference: return "reference";
+    case PositionSource::automatic: return "auto";
+  }
+  return "auto";
+}
+
+std::optional<PositionSource> parse_position_source(std::string_view s) {
+  for (const auto p : {PositionSource::encoder, PositionSource::reference, PositionSource::automatic})
+    if (s == to_string(p)) return p;
+  return std::nullopt;
+}
+
+PositionSource resolved_position(PositionSource requested, const std::string& source) {
+  if (requested != PositionSource::automatic) return requested;
+  return source.rfind("manip_rt", 0) == 0 ? PositionSource::reference : PositionSource::encoder;
+}
+
 std::vector<Vec2> aligned_reference(const TrialData& t, int shift) {
   const std::size_t n = t.x_m.size();
   const auto name = "trial " + std::to_string(t.trial) + ": ";

@@ -212,3 +212,65 @@ TEST_CASE("trial data: the admittance reference is aligned by its producer's con
   t.x_ref_m.clear();
   CHECK_THROWS_AS(manip::estimation::aligned_reference(t, 0), std::invalid_argument);
 }
+
+// position_source auto (the default): the reference on a controller's log,
+// the encoder on a manip_sim log; under auto a trial without a finite
+// reference keeps the encoder and is listed, under an explicit "reference" it
+// is excluded, naming it. The recorded log is manip_sim's (its x_ref is the
+// simulated handle); relabelled as manip_rt's, its x_ref reads as the
+// set-point for the next sample and is shifted by one.
+TEST_CASE("position auto: the reference on a manip_rt log, the encoder elsewhere, a trial without a reference kept on the encoder") {
+  CHECK(est::resolved_position(est::PositionSource::automatic, "manip_rt/sim") == est::PositionSource::reference);
+  CHECK(est::resolved_position(est::PositionSource::automatic, "manip_rt/can") == est::PositionSource::reference);
+  CHECK(est::resolved_position(est::PositionSource::automatic, "manip_sim/linear") == est::PositionSource::encoder);
+  CHECK(est::resolved_position(est::PositionSource::automatic, "manip_import:rig.mat") == est::PositionSource::encoder);
+  CHECK(est::resolved_position(est::PositionSource::automatic, "") == est::PositionSource::encoder);
+  CHECK(est::resolved_position(est::PositionSource::encoder, "manip_rt/sim") == est::PositionSource::encoder);
+  CHECK(est::resolved_position(est::PositionSource::reference, "manip_sim") == est::PositionSource::reference);
+  for (const auto p : {est::PositionSource::encoder, est::PositionSource::reference, est::PositionSource::automatic})
+    CHECK(est::parse_position_source(est::to_string(p)) == p);
+  CHECK(!est::parse_position_source("stage"));
+
+  // The first perturbed trial loses its reference (NaN, as an imported log's).
+  testutil::Recorded rec = recorded();
+  rec.session.source = "manip_rt/sim";
+  int damaged = -1;
+  for (const auto& it : rec.items)
+    if (is_event(it, manip::trial_event_t::ONSET)) {
+      damaged = it.event.trial;
+      break;
+    }
+  REQUIRE(damaged >= 0);
+  for (auto& it : rec.items)
+    if (it.kind == 0 && it.state.trial == damaged) it.state.x_ref_workspace_m[0] = std::numeric_limits<double>::quiet_NaN();
+  const auto dir = testutil::temp_dir("position_auto");
+  testutil::write_recorded(rec, dir + "/rt_labelled.lcm");
+  est::EstimatorSettings s;
+  s.methods = {"paper"};
+  REQUIRE(s.position == est::PositionSource::automatic);
+  const auto a = est::estimate_log(dir + "/rt_labelled.lcm", s);
+  CHECK(a.position_used == est::PositionSource::reference);
+  CHECK(a.n_used == 8);
+  CHECK(a.n_reference_shift1 == 7);
+  CHECK(a.n_reference_shift0 == 0);
+  CHECK(a.reference_fallback_trials == std::vector<int>{damaged});
+  CHECK(a.issues.empty());
+  s.position = est::PositionSource::reference;
+  const auto r = est::estimate_log(dir + "/rt_labelled.lcm", s);
+  CHECK(r.n_used == 7);
+  CHECK(r.reference_fallback_trials.empty());
+  REQUIRE(r.issues.size() == 1);
+  CHECK(r.issues[0].trial == damaged);
+  CHECK_THAT(r.issues[0].reason, Catch::Contains("x_ref"));
+  // The same log as manip_sim wrote it: auto takes the encoder.
+  s.position = est::PositionSource::automatic;
+  testutil::write_recorded(recorded(), dir + "/sim.lcm");
+  const auto e = est::estimate_log(dir + "/sim.lcm", s);
+  CHECK(e.position_used == est::PositionSource::encoder);
+  CHECK(e.n_reference_shift0 + e.n_reference_shift1 == 0);
+  s.position = est::PositionSource::encoder;
+  const auto e2 = est::estimate_log(dir + "/sim.lcm", s);
+  REQUIRE(!e.summaries.empty());
+  REQUIRE(!e2.summaries.empty());
+  CHECK(e.summaries[0].d_nspm == e2.summaries[0].d_nspm);
+}

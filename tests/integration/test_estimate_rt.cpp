@@ -155,11 +155,14 @@ TEST_CASE("manip_rt sim session: positions from the admittance reference recover
   const auto path = tmp_log("tracking");
   run_rendered(cfg, path);
   const auto enc = estimate_file(path);
-  const auto ref = estimate_file(path, est::PositionSource::reference);
+  // The default position ("auto") takes the reference on a manip_rt log.
+  const auto ref = estimate_file(path, est::EstimatorSettings{}.position);
   const auto* se = session_summary(enc, est::default_method());
   const auto* sr = session_summary(ref, est::default_method());
   REQUIRE(se);
   REQUIRE(sr);
+  CHECK(enc.position_used == est::PositionSource::encoder);
+  CHECK(ref.position_used == est::PositionSource::reference);
   CHECK(ref.n_used == 24);
   CHECK(ref.n_reference_shift1 == 24);  // the set-point for the next sample, in every trial
   CHECK(ref.n_reference_shift0 == 0);
@@ -186,6 +189,8 @@ TEST_CASE("manip_rt sim session: positions from the admittance reference recover
   REQUIRE(sw.switched);
   CHECK(sw.share > 0.8);
   CHECK(std::abs(sw.coef - 1.0) < 0.1);
+  CHECK(sw.heldout_share > 0.8);       // it predicts trials it was not fitted on
+  CHECK(sw.heldout_better == sw.trials);
   CHECK(sw.shift1 == 24);
   REQUIRE(sw.on_encoder.available);
   CHECK((sw.on_encoder.d - se->d_nspm).norm() < 1e-3 * d_true.norm());

@@ -133,12 +133,15 @@ struct RefinedExtension {
 struct TrackingSwitch {
   bool switched = false;
   double share = 0.0, coef = 0.0;  // SensorDelay::tracking_share, tracking_coef on the encoder
+  double heldout_share = 0.0;      // SensorDelay::tracking_heldout_share (leave one trial out)
+  int heldout_better = 0, trials = 0;  // trials whose held-out residual the column lowered, of
   double rms_um = 0.0;             // x_ref − x RMS over the windows (TrackingSummary)
   int shift0 = 0, shift1 = 0;      // trials whose reference was aligned by 0 and by 1 sample
   PemBaseline on_encoder;          // the default method on the encoder
 };
 // The rule: tracking takes at least this share of the disagreement, with a
-// coefficient within this distance of 1 (the header of sensor_delay.hpp).
+// coefficient within this distance of 1 (the header of sensor_delay.hpp),
+// and lowers the disagreement on held-out trials (a positive held-out share).
 inline constexpr double kTrackingMinShare = 0.5, kTrackingCoefTolerance = 0.2;
 
 struct PlanarPrepared {

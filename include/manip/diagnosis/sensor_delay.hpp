@@ -69,6 +69,12 @@ struct SensorDelay {
   // residual it removed at the coarse optimum (0: not in the fit).
   double tracking_coef = 0.0;
   double tracking_share = 0.0;
+  // The column on held-out trials: each trial left out in turn, the
+  // coefficients fitted on the others with and without the column (each fit
+  // at its own τ), 1 − √(SS with / SS without) over the trials left out, and
+  // in how many of them the column lowered the residual.
+  double tracking_heldout_share = 0.0;
+  int tracking_heldout_better = 0;
   int trials = 0;
   int bootstrap = 0;
 };

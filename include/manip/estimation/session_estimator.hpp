@@ -58,9 +58,15 @@ struct Report {
   std::vector<TrialIssue> issues;
   std::vector<std::string> warnings;
   std::vector<VariationalWindow> windows;  // if keep_windows
-  // Position "reference" (EstimatorSettings::position): used trials whose
-  // logged x_ref was aligned by 0 and by 1 sample (aligned_reference).
+  // The position the session's trials took (EstimatorSettings::position
+  // resolved for info.source: resolved_position). On the reference: used
+  // trials whose logged x_ref was aligned by 0 and by 1 sample
+  // (aligned_reference), and, under "auto" only, the trials without a finite
+  // reference that took the encoder instead (an explicit "reference" excludes
+  // them, naming each).
+  PositionSource position_used{PositionSource::encoder};
   int n_reference_shift0{0}, n_reference_shift1{0};
+  std::vector<int> reference_fallback_trials;
 };
 
 class SessionEstimator {
@@ -91,6 +97,7 @@ class SessionEstimator {
     Mat2 truth_d{Mat2::Zero()}, truth_k{Mat2::Zero()}, truth_m{Mat2::Zero()};
     std::string truth_model;
     int reference_shift{-1};  // position "reference": samples the logged x_ref was shifted by (0, 1)
+    bool reference_fallback{false};  // "auto": no finite reference in this trial, the encoder taken
   };
   // jerk_x2: the trial's x2 jerk if already computed (for the PSD), else empty.
   Prepared prepare(const TrialData& t, const PipelineSettings& pipe, std::span<const double> jerk_x2) const;

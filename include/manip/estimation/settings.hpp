@@ -29,7 +29,7 @@ struct EstimatorSettings {
   LsOptions ls{};
   OeSettings oe{};
   PemSettings pem{};
-  PositionSource position{PositionSource::encoder};  // the handle position every method sees (trial_data.hpp)
+  PositionSource position{PositionSource::automatic};  // the handle position every method sees (trial_data.hpp)
   std::vector<std::string> methods{default_method()};  // names in the method registry (methods/registry.hpp)
   bool keep_windows{false};  // keep variational windows for --export-signals / --plots
 };

@@ -101,8 +101,11 @@ nlohmann::json to_json(const Report& r, const std::string& log_name) {
   j["cutoff_used_hz"] = r.cutoff_used_hz;
   j["sg_window"] = r.sg_window;
   j["counts"] = {{"trials", r.n_trials}, {"perturbed", r.n_perturbed}, {"used", r.n_used}};
-  if (r.settings.position == PositionSource::reference)
-    j["reference_alignment"] = {{"shift0_trials", r.n_reference_shift0}, {"shift1_trials", r.n_reference_shift1}};
+  j["position_used"] = to_string(r.position_used);
+  if (r.position_used == PositionSource::reference)
+    j["reference_alignment"] = {{"shift0_trials", r.n_reference_shift0},
+                                {"shift1_trials", r.n_reference_shift1},
+                                {"encoder_fallback_trials", r.reference_fallback_trials}};
   auto& summ = j["summaries"] = nlohmann::json::array();
   for (const auto& s : r.summaries) summ.push_back(summary_json(s));
   // Session summary per method, as promised in docs/estimator.md.

@@ -32,9 +32,18 @@ std::string format_text(const Report& r, const std::string& log_name) {
   o << "  trials " << r.n_trials << ", perturbed " << r.n_perturbed << ", used " << r.n_used << "; SG window "
     << (r.sg_window > 0 ? std::to_string(r.sg_window) : std::string("n/a")) << ", high-pass " << fmt(r.cutoff_used_hz, 3) << " Hz"
     << (r.settings.cutoff_auto ? " (auto)" : "") << ", T_est " << r.settings.pipeline.t_est_s << " s\n";
-  if (r.settings.position == PositionSource::reference)
-    o << "  positions: the admittance reference x_ref, not the encoder (--position-source reference); aligned to the encoder by "
-      << "0 samples in " << r.n_reference_shift0 << " trials, 1 sample in " << r.n_reference_shift1 << "\n";
+  if (r.position_used == PositionSource::reference) {
+    o << "  positions: the admittance reference x_ref, not the encoder ("
+      << (r.settings.position == PositionSource::automatic ? "auto, a controller's log; --position-source encoder for the encoder"
+                                                            : "--position-source reference")
+      << "), aligned by 1 sample in " << r.n_reference_shift1 << " trials, by 0 in " << r.n_reference_shift0;
+    if (!r.reference_fallback_trials.empty()) {
+      o << "; the encoder in " << r.reference_fallback_trials.size() << " without a finite reference (trial";
+      for (const int t : r.reference_fallback_trials) o << " " << t;
+      o << ")";
+    }
+    o << "\n";
+  }
   if (r.psd.n_unperturbed > 0)
     o << "  PSD: unperturbed peak " << fmt(r.psd.peak_unperturbed_hz, 3) << " Hz; auto cut-off "
       << fmt(r.psd.cutoff_auto_hz, 3) << " Hz (ratio > " << r.settings.cutoff_auto_threshold_db
