@@ -115,7 +115,8 @@ int run(int argc, char** argv) {
   app.add_option("--position-source", position_source,
                  "auto (default): the reference on manip_rt logs, the encoder otherwise | encoder (measured) | reference: the "
                  "admittance's x_ref aligned to the encoder, for every method (exact in eq. 21 when the stages track it through "
-                 "a PD; docs/estimator.md, \"Which position\")");
+                 "a PD) | tracked: the encoder, with the tracking error x_ref - x as a known force on the loop "
+                 "(docs/estimator.md, \"Which position\")");
   app.add_option("--oe-pre", oe_pre, "output error: data before onset, [0, 0.5] s (default 0.05)");
   app.add_option("--oe-poly-order", oe_poly, "output error: per-trial polynomial order, [0, 8] (default 3)");
   app.add_flag("--no-jackknife", no_jackknife, "output error: least-squares SE instead of the jackknife over trials");
@@ -169,7 +170,7 @@ int run(int argc, char** argv) {
   }
   if (!position_source.empty()) {
     const auto p = parse_position_source(position_source);
-    if (!p) throw manip::UsageError("--position-source " + position_source + ": expected auto, encoder or reference");
+    if (!p) throw manip::UsageError("--position-source " + position_source + ": expected auto, encoder, reference or tracked");
     s.position = *p;
   }
   if (given("--oe-pre")) s.oe.t_pre_s = number("--oe-pre", oe_pre, 0.0, 0.5, false, "[0, 0.5] s");

@@ -253,6 +253,10 @@ void isolated_tracking(const estimation::SessionInfo& info, const estimation::Tr
 
 PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const PlanarOptions& opt, int folds) {
   if (sessions.empty()) throw InputError("no session log given");
+  // The library's columns and the likelihood's corrections are built on one
+  // position; "tracked" (two, tracking_input.hpp) is the estimator's.
+  if (opt.estimator.position == estimation::PositionSource::tracked)
+    throw std::invalid_argument("the diagnosis runs on the encoder or the reference (position auto, encoder or reference), not tracked");
   for (std::size_t i = 1; i < sessions.size(); ++i) {
     const auto diff = configuration_difference(sessions[0].info, sessions[i].info);
     if (!diff.empty())

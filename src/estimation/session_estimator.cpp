@@ -18,6 +18,7 @@
 #include "manip/logging/event_log.hpp"
 #include "manip/logging/session_stream.hpp"
 #include "manip/dsp/dsp.hpp"
+#include "manip/estimation/tracking_input.hpp"
 
 namespace manip::estimation {
 namespace {
@@ -95,12 +96,13 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& trial, con
     // the encoder's, so it is recomputed.
     std::optional<std::vector<Vec2>> x_ref;
     const int shift = reference_shift_for(info_.source);
-    if (resolved_position(s_.position, info_.source) == PositionSource::reference) {
+    const PositionSource pos = resolved_position(s_.position, info_.source);
+    if (pos == PositionSource::reference || pos == PositionSource::tracked) {
       try {
         x_ref = aligned_reference(trial, shift);
       } catch (const std::invalid_argument&) {
         // "auto" keeps the trial on the encoder (the paper's position); an
-        // explicit "reference" excludes it with the reason.
+        // explicit "reference" or "tracked" excludes it with the reason.
         if (s_.position != PositionSource::automatic) throw;
         p.reference_fallback = true;
       }
@@ -110,9 +112,11 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& trial, con
       on_ref = trial;
       on_ref.x_m = std::move(*x_ref);
       p.reference_shift = shift;
-      jerk_x2 = {};
     }
-    const TrialData& t = x_ref ? on_ref : trial;
+    const bool tracked = x_ref && pos == PositionSource::tracked;
+    const bool on_reference = x_ref && !tracked;
+    if (on_reference) jerk_x2 = {};
+    const TrialData& t = on_reference ? on_ref : trial;
     const TwoLinkArm arm(info_.anthropometrics);
     const Vec2 x_on = t.x_m.at(static_cast<std::size_t>(t.onset_index));
     const auto m_bsp = arm.endpoint_inertia_at(x_on);
@@ -122,6 +126,10 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& trial, con
     p.vw = isolate_variational(info_, t, pipe, jerk_x2);
     if (needs(windows_, DataWindow::output_error)) p.ow = make_oe_window(info_, t, *m_bsp, s_.oe);
     if (needs(windows_, DataWindow::prediction_error)) p.pw = make_pem_window(info_, t, *m_bsp, s_.pem);
+    if (tracked) {
+      OeWindow* const w[] = {&p.ow, &p.pw};
+      add_tracking_input(info_, trial, on_ref.x_m, pipe, p.vw, w);
+    }
     p.m_bsp = *m_bsp;
     if (t.has_truth) {
       p.has_truth = true;

@@ -50,7 +50,7 @@ EstimatorSettings load_estimator_settings(const std::string& path, EstimatorSett
   if (y.has("force_source"))
     s.ls.force = y.choice("force_source", {"admittance", "sensor"}) == "admittance" ? ForceSource::admittance : ForceSource::sensor;
   if (y.has("position_source"))
-    s.position = *parse_position_source(y.choice("position_source", {"encoder", "reference", "auto"}));
+    s.position = *parse_position_source(y.choice("position_source", {"encoder", "reference", "auto", "tracked"}));
   if (y.has("oe_t_pre_s"))
     s.oe.t_pre_s = y.number("oe_t_pre_s", [](double v) { return v >= 0 && v <= 0.5; }, "must be in [0, 0.5] s");
   if (y.has("oe_poly_order")) s.oe.poly_order = static_cast<int>(y.integer("oe_poly_order", 0, 8));

@@ -26,12 +26,13 @@ const char* to_string(PositionSource p) {
     case PositionSource::encoder: return "encoder";
     case PositionSource::reference: return "reference";
     case PositionSource::automatic: return "auto";
+    case PositionSource::tracked: return "tracked";
   }
   return "auto";
 }
 
 std::optional<PositionSource> parse_position_source(std::string_view s) {
-  for (const auto p : {PositionSource::encoder, PositionSource::reference, PositionSource::automatic})
+  for (const auto p : {PositionSource::encoder, PositionSource::reference, PositionSource::automatic, PositionSource::tracked})
     if (s == to_string(p)) return p;
   return std::nullopt;
 }

@@ -48,6 +48,7 @@ TEST_CASE("settings: values are read, and t_est_s sets every method's window") {
   CHECK(load_estimator_settings(write("pos.yaml", "position_source: reference\n")).position == PositionSource::reference);
   CHECK(load_estimator_settings(write("pos_enc.yaml", "position_source: encoder\n")).position == PositionSource::encoder);
   CHECK(load_estimator_settings(write("pos_auto.yaml", "position_source: auto\n")).position == PositionSource::automatic);
+  CHECK(load_estimator_settings(write("pos_trk.yaml", "position_source: tracked\n")).position == PositionSource::tracked);
   const auto bad_pos = write("bad_pos.yaml", "position_source: stage\n");
   CHECK(config_error(bad_pos).find(bad_pos + ":1: position_source") == 0);
   CHECK(load_estimator_settings(write("all.yaml", "methods: [all]\n")).methods == all_methods());

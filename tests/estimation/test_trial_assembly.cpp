@@ -227,7 +227,9 @@ TEST_CASE("position auto: the reference on a manip_rt log, the encoder elsewhere
   CHECK(est::resolved_position(est::PositionSource::automatic, "") == est::PositionSource::encoder);
   CHECK(est::resolved_position(est::PositionSource::encoder, "manip_rt/sim") == est::PositionSource::encoder);
   CHECK(est::resolved_position(est::PositionSource::reference, "manip_sim") == est::PositionSource::reference);
-  for (const auto p : {est::PositionSource::encoder, est::PositionSource::reference, est::PositionSource::automatic})
+  CHECK(est::resolved_position(est::PositionSource::tracked, "manip_sim") == est::PositionSource::tracked);
+  for (const auto p : {est::PositionSource::encoder, est::PositionSource::reference, est::PositionSource::automatic,
+                       est::PositionSource::tracked})
     CHECK(est::parse_position_source(est::to_string(p)) == p);
   CHECK(!est::parse_position_source("stage"));
 
@@ -262,6 +264,13 @@ TEST_CASE("position auto: the reference on a manip_rt log, the encoder elsewhere
   REQUIRE(r.issues.size() == 1);
   CHECK(r.issues[0].trial == damaged);
   CHECK_THAT(r.issues[0].reason, Catch::Contains("x_ref"));
+  s.position = est::PositionSource::tracked;  // needs the reference too: excluded the same way
+  const auto tk = est::estimate_log(dir + "/rt_labelled.lcm", s);
+  CHECK(tk.position_used == est::PositionSource::tracked);
+  CHECK(tk.n_used == 7);
+  CHECK(tk.n_reference_shift1 == 7);
+  REQUIRE(tk.issues.size() == 1);
+  CHECK(tk.issues[0].trial == damaged);
   // The same log as manip_sim wrote it: auto takes the encoder.
   s.position = est::PositionSource::automatic;
   testutil::write_recorded(recorded(), dir + "/sim.lcm");

@@ -58,11 +58,15 @@ struct TrialData {
 // track the reference through a PD, eq. 21 holds exactly for the reference,
 // and only approximately for the encoder: the tracking error e = x_ref − x
 // enters Δu_ext as M_adm Δë + D_adm Δė (docs/diagnosis.md, "Tracking").
+// tracked: the encoder as the person's position, and the tracking error as
+// a known input: the admittance integrated x_ref = x + e, so the loop gets
+// u_pert − M_adm ë − D_adm ė and eq. 21 the reference's kinematics for the
+// admittance (exact on both sides, up to the isolation of e).
 // automatic ("auto", the default): the reference on a controller's log
 // (session_t.source "manip_rt…"), the encoder otherwise (resolved_position).
-enum class PositionSource { encoder, reference, automatic };
+enum class PositionSource { encoder, reference, automatic, tracked };
 
-// "encoder", "reference", "auto" (the YAML's and the CLI's spelling).
+// "encoder", "reference", "auto", "tracked" (the YAML's and the CLI's spelling).
 const char* to_string(PositionSource p);
 std::optional<PositionSource> parse_position_source(std::string_view s);
 

@@ -102,7 +102,7 @@ nlohmann::json to_json(const Report& r, const std::string& log_name) {
   j["sg_window"] = r.sg_window;
   j["counts"] = {{"trials", r.n_trials}, {"perturbed", r.n_perturbed}, {"used", r.n_used}};
   j["position_used"] = to_string(r.position_used);
-  if (r.position_used == PositionSource::reference)
+  if (r.position_used == PositionSource::reference || r.position_used == PositionSource::tracked)
     j["reference_alignment"] = {{"shift0_trials", r.n_reference_shift0},
                                 {"shift1_trials", r.n_reference_shift1},
                                 {"encoder_fallback_trials", r.reference_fallback_trials}};

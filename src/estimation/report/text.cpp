@@ -32,6 +32,10 @@ std::string format_text(const Report& r, const std::string& log_name) {
   o << "  trials " << r.n_trials << ", perturbed " << r.n_perturbed << ", used " << r.n_used << "; SG window "
     << (r.sg_window > 0 ? std::to_string(r.sg_window) : std::string("n/a")) << ", high-pass " << fmt(r.cutoff_used_hz, 3) << " Hz"
     << (r.settings.cutoff_auto ? " (auto)" : "") << ", T_est " << r.settings.pipeline.t_est_s << " s\n";
+  if (r.position_used == PositionSource::tracked)
+    o << "  positions: the encoder, with the stages' tracking error e = x_ref - x as a known force on the loop "
+         "(M_adm Δë + D_adm Δė; --position-source tracked), x_ref aligned by 1 sample in "
+      << r.n_reference_shift1 << " trials, by 0 in " << r.n_reference_shift0 << "\n";
   if (r.position_used == PositionSource::reference) {
     o << "  positions: the admittance reference x_ref, not the encoder ("
       << (r.settings.position == PositionSource::automatic ? "auto, a controller's log; --position-source encoder for the encoder"
