@@ -91,9 +91,11 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& trial, con
   Prepared p;
   p.trial = trial.trial;
   try {
-    // Position "reference": every method sees the aligned admittance
-    // reference as x (trial_data.hpp); the x2 jerk computed for the PSD was
-    // the encoder's, so it is recomputed.
+    // Position "reference" (and "auto" on a controller's log): every method
+    // sees the aligned admittance reference as x (trial_data.hpp); the x2
+    // jerk computed for the PSD was the encoder's, so it is recomputed.
+    // "tracked": the encoder stays x, and the reference gives the tracking
+    // input (tracking_input.hpp).
     std::optional<std::vector<Vec2>> x_ref;
     const int shift = reference_shift_for(info_.source);
     const PositionSource pos = resolved_position(s_.position, info_.source);

@@ -134,7 +134,8 @@ struct TrackingSwitch {
   bool switched = false;
   double share = 0.0, coef = 0.0;  // SensorDelay::tracking_share, tracking_coef on the encoder
   double heldout_share = 0.0;      // SensorDelay::tracking_heldout_share (leave one trial out)
-  int heldout_better = 0, trials = 0;  // trials whose held-out residual the column lowered, of
+  int heldout_better = 0;          // trials left out whose residual the column lowered
+  int trials = 0;                  // trials in the sensor's fit
   double rms_um = 0.0;             // x_ref − x RMS over the windows (TrackingSummary)
   int shift0 = 0, shift1 = 0;      // trials whose reference was aligned by 0 and by 1 sample
   PemBaseline on_encoder;          // the default method on the encoder
