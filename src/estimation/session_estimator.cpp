@@ -109,16 +109,15 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& trial, con
         p.reference_fallback = true;
       }
     }
+    if (x_ref) p.reference_shift = shift;
+    const bool tracked = x_ref && pos == PositionSource::tracked;
     TrialData on_ref;
-    if (x_ref) {
+    if (x_ref && !tracked) {
       on_ref = trial;
       on_ref.x_m = std::move(*x_ref);
-      p.reference_shift = shift;
+      jerk_x2 = {};
     }
-    const bool tracked = x_ref && pos == PositionSource::tracked;
-    const bool on_reference = x_ref && !tracked;
-    if (on_reference) jerk_x2 = {};
-    const TrialData& t = on_reference ? on_ref : trial;
+    const TrialData& t = x_ref && !tracked ? on_ref : trial;
     const TwoLinkArm arm(info_.anthropometrics);
     const Vec2 x_on = t.x_m.at(static_cast<std::size_t>(t.onset_index));
     const auto m_bsp = arm.endpoint_inertia_at(x_on);
@@ -130,7 +129,7 @@ SessionEstimator::Prepared SessionEstimator::prepare(const TrialData& trial, con
     if (needs(windows_, DataWindow::prediction_error)) p.pw = make_pem_window(info_, t, *m_bsp, s_.pem);
     if (tracked) {
       OeWindow* const w[] = {&p.ow, &p.pw};
-      add_tracking_input(info_, trial, on_ref.x_m, pipe, p.vw, w);
+      add_tracking_input(info_, trial, *x_ref, pipe, p.vw, w);
     }
     p.m_bsp = *m_bsp;
     if (t.has_truth) {
