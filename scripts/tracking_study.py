@@ -7,9 +7,10 @@ Each cell is a PD bandwidth (Hz); the shipped rt.yaml has 25 Hz
 (kp = m w^2, kd = 2 zeta m w), so a cell scales kp by (f/25)^2 and kd by
 f/25. Each session: a seeded rt.yaml variant (protocol seed and the
 participant's seed both = the session seed), `manip_rt --backend sim`, then
-`diagnose_model --json` and `estimate_impedance --position-source encoder
---json` (the paper's position, for comparison; the default "auto" is the
-reference on these logs). diagnose_model sees only the log.
+`diagnose_model --json` and `estimate_impedance --position-source S --json`
+for each S of --sources (default the encoder: the paper's position, for
+comparison; the default "auto" is the reference on these logs);
+--no-diagnosis runs the estimator alone. diagnose_model sees only the log.
 
 Per session: whether the tracking was named (the diagnosis moved to the
 reference), its share, coefficient (1 when the routes differ by the
@@ -20,6 +21,10 @@ Frobenius and the diagonal elements, the issue's D within 20 %, K within
 session.
 
     scripts/tracking_study.py --build build --cells 25,15,10 --seeds 20 [--noise realistic] [--jobs 2] [--keep DIR]
+        [--sources encoder,reference,tracked] [--no-diagnosis] [--verbose]
+
+Prints a table of the estimator per position source, then (without
+--no-diagnosis) the diagnosis' table.
 """
 import argparse
 import concurrent.futures as cf
@@ -70,7 +75,7 @@ def variant(base, bandwidth_hz, seed, noise):
     return t
 
 
-def run_one(build, base, cell, seed, noise, work):
+def run_one(build, base, cell, seed, noise, work, sources, diagnose, keep):
     d = os.path.join(work, "f%g_s%d" % (cell, seed))
     os.makedirs(d, exist_ok=True)
     cfg = os.path.join(d, "rt.yaml")
@@ -81,17 +86,31 @@ def run_one(build, base, cell, seed, noise, work):
                          "--out", log, "--lcm-url", "none", "-q", "--force"], capture_output=True, text=True)
     if rt.returncode != 0:
         return {"cell": cell, "seed": seed, "error": "manip_rt exit %d: %s" % (rt.returncode, rt.stderr.strip()[-300:])}
-    dj = os.path.join(d, "diagnosis.json")
-    dg = subprocess.run([os.path.join(build, "apps/diagnose_model"), log, "--json", dj, "--force", "-q"],
-                        capture_output=True, text=True)
-    if not os.path.exists(dj):
-        return {"cell": cell, "seed": seed, "error": "diagnose_model exit %d: %s" % (dg.returncode, dg.stderr.strip()[-300:])}
-    ej = os.path.join(d, "encoder.json")
-    subprocess.run([os.path.join(build, "apps/estimate_impedance"), log, "--position-source", "encoder", "--json", ej,
-                    "--force", "-q"], capture_output=True, text=True)
-    with open(dj) as f:
-        dia = json.load(f)
-    out = {"cell": cell, "seed": seed}
+    out = {"cell": cell, "seed": seed, "src": {}}
+    try:
+        for src in sources:
+            ej = os.path.join(d, src + ".json")
+            subprocess.run([os.path.join(build, "apps/estimate_impedance"), log, "--position-source", src, "--json", ej,
+                            "--force", "-q"], capture_output=True, text=True)
+            if os.path.exists(ej):
+                with open(ej) as f:
+                    est = json.load(f)
+                sm = next(iter(est["sessions"][0]["session_summary"].values()))
+                out["src"][src] = (np.array(sm["D_Nspm"]).reshape(2, 2), np.array(sm["K_Npm"]).reshape(2, 2))
+        if "encoder" in out["src"]:
+            out["d_enc"], out["k_enc"] = out["src"]["encoder"]
+        if not diagnose:
+            return out
+        dj = os.path.join(d, "diagnosis.json")
+        dg = subprocess.run([os.path.join(build, "apps/diagnose_model"), log, "--json", dj, "--force", "-q"],
+                            capture_output=True, text=True)
+        if not os.path.exists(dj):
+            return {"cell": cell, "seed": seed, "error": "diagnose_model exit %d: %s" % (dg.returncode, dg.stderr.strip()[-300:])}
+        with open(dj) as f:
+            dia = json.load(f)
+    finally:
+        if not keep:  # a manip_rt session log is ~0.4 GB
+            os.remove(log)
     tr = dia["manipulandum"]["sensor_disagreement"]["tracking"]
     con = dia["conclusion"]
     out["switched"] = bool(tr.get("switched"))
@@ -101,12 +120,6 @@ def run_one(build, base, cell, seed, noise, work):
     if "corrected" in con:
         out["d"] = np.array(con["corrected"]["d_nspm"])
         out["k"] = np.array(con["corrected"]["k_npm"])
-    if os.path.exists(ej):
-        with open(ej) as f:
-            enc = json.load(f)
-        sm = next(iter(enc["sessions"][0]["session_summary"].values()))
-        out["d_enc"] = np.array(sm["D_Nspm"]).reshape(2, 2)
-        out["k_enc"] = np.array(sm["K_Npm"]).reshape(2, 2)
     return out
 
 
@@ -128,6 +141,10 @@ def main():
     ap.add_argument("--noise", choices=["none", "realistic"], default="realistic")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--keep", help="keep the sessions and reports in this directory (default: a temporary one, removed)")
+    ap.add_argument("--sources", default="encoder",
+                    help="estimate_impedance --position-source values run on each session (comma-separated; "
+                         "encoder, reference, tracked, auto)")
+    ap.add_argument("--no-diagnosis", action="store_true", help="only the estimator (--sources), no diagnose_model")
     ap.add_argument("--verbose", action="store_true")
     a = ap.parse_args()
     with open(a.config) as f:
@@ -139,7 +156,9 @@ def main():
     jobs = [(c, s) for c in cells for s in range(a.first_seed, a.first_seed + a.seeds)]
     results = []
     with cf.ThreadPoolExecutor(max_workers=a.jobs) as ex:
-        futs = {ex.submit(run_one, a.build, base, c, s, a.noise, work): (c, s) for c, s in jobs}
+        sources = [x for x in a.sources.split(",") if x]
+        futs = {ex.submit(run_one, a.build, base, c, s, a.noise, work, sources, not a.no_diagnosis, bool(a.keep)): (c, s)
+                for c, s in jobs}
         for fu in cf.as_completed(futs):
             r = fu.result()
             results.append(r)
@@ -147,16 +166,37 @@ def main():
                 if "error" in r:
                     print("f %g seed %d: %s" % (r["cell"], r["seed"], r["error"]), file=sys.stderr)
                 else:
-                    extra = ""
-                    if "d" in r:
-                        extra = " D %.1f %% K %.1f %% (encoder D %.1f %% K %.1f %%)" % (
-                            100 * frob(r["d"], d_true), 100 * frob(r["k"], k_true),
-                            100 * frob(r["d_enc"], d_true) if "d_enc" in r else float("nan"),
-                            100 * frob(r["k_enc"], k_true) if "k_enc" in r else float("nan"))
-                    print("f %g seed %d: moved %s share %.3f coef %.3f held-out %.3f (%s/%s) %.1f um named %s%s" % (
-                        r["cell"], r["seed"], r["switched"], r["share"] or 0, r["coef"] or 0, r["heldout_share"] or 0,
-                        r.get("heldout_better_trials"), r.get("trials"), r["rms_um"] or 0, r["named"], extra),
-                        file=sys.stderr, flush=True)
+                    est = "".join(" %s D %.1f %% K %.1f %%" % (src, 100 * frob(dk[0], d_true), 100 * frob(dk[1], k_true))
+                                  for src, dk in r["src"].items())
+                    if "switched" not in r:
+                        print("f %g seed %d:%s" % (r["cell"], r["seed"], est), file=sys.stderr, flush=True)
+                    else:
+                        extra = (" D %.1f %% K %.1f %%" % (100 * frob(r["d"], d_true), 100 * frob(r["k"], k_true))) if "d" in r else ""
+                        print("f %g seed %d: moved %s share %.3f coef %.3f held-out %.3f (%s/%s) %.1f um named %s%s;%s" % (
+                            r["cell"], r["seed"], r["switched"], r["share"] or 0, r["coef"] or 0, r["heldout_share"] or 0,
+                            r.get("heldout_better_trials"), r.get("trials"), r["rms_um"] or 0, r["named"], extra, est),
+                            file=sys.stderr, flush=True)
+    med = lambda xs: statistics.median(xs) if xs else float("nan")
+    # The estimator alone, per position source.
+    print("| PD bandwidth | position source | sessions | D within 20 % (Frobenius; D11, D22) | K within 10 % (Frobenius; K11, K22) "
+          "| median D, K error |")
+    print("|---|---|---|---|---|---|")
+    for c in cells:
+        for src in sources:
+            es = [r["src"][src] for r in results if r["cell"] == c and "error" not in r and src in r["src"]]
+            print("| %g Hz | %s | %d | %d/%d; %d/%d | %d/%d; %d/%d | %.1f %%, %.1f %% |" % (
+                c, src, len(es), sum(frob(d, d_true) <= 0.2 for d, _ in es), len(es),
+                sum(diag_ok(d, d_true, 0.2) for d, _ in es), len(es), sum(frob(k, k_true) <= 0.1 for _, k in es), len(es),
+                sum(diag_ok(k, k_true, 0.1) for _, k in es), len(es),
+                100 * med([frob(d, d_true) for d, _ in es]), 100 * med([frob(k, k_true) for _, k in es])))
+    if a.no_diagnosis:
+        for r in results:
+            if "error" in r:
+                print("failed: PD %g Hz seed %d: %s" % (r["cell"], r["seed"], r["error"]))
+        if not a.keep:
+            shutil.rmtree(work, ignore_errors=True)
+        return 1 if any("error" in r for r in results) else 0
+    print()
     print("| PD bandwidth | sessions | tracking named | coefficient within 0.2 of 1 (median) | held-out share > 0 (median) "
           "| RMS x_ref − x, median | also named | D within 20 % (Frobenius; D11, D22) | K within 10 % (Frobenius; K11, K22) "
           "| median D, K error | encoder: D within 20 %, K within 10 % (Frobenius); median D, K error |")
@@ -178,7 +218,6 @@ def main():
         k_ok = sum(frob(r["k"], k_true) <= 0.1 for r in wd)
         k_dg = sum(diag_ok(r["k"], k_true, 0.1) for r in wd)
         we = [r for r in rs if "d_enc" in r]
-        med = lambda xs: statistics.median(xs) if xs else float("nan")
         print("| %g Hz | %d%s | %d/%d | %d/%d (%.3f) | %d/%d (%.3f) | %.1f µm | %s | %d/%d; %d/%d | %d/%d; %d/%d | %.1f %%, %.1f %% | %d/%d, %d/%d; %.1f %%, %.1f %% |" % (
             c, n, (" (%d failed)" % len(errs)) if errs else "", named, n, coef_ok, n, med([r["coef"] for r in rs if r["coef"]]),
             held, n, med([r["heldout_share"] for r in rs if r["heldout_share"] is not None]),

@@ -954,6 +954,15 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
     c.tracking_note = "the stages lag the admittance reference (tracking: " + g4(100 * prep.tracking.share) +
                       " % of eq. 21's disagreement with the force sensor on the encoder, " + g4(prep.tracking.rms_um) +
                       " um RMS); eq. 21 holds for the reference, and the diagnosis ran on it (docs/diagnosis.md, \"Tracking\")";
+    // On the reference the person's side carries the lag (M_BSP Δë + D Δė +
+    // K Δe); "tracked" models it exactly at the price of ë's noise: given
+    // beside the corrected estimate, for the lab to choose by its stages'
+    // lag (docs/estimator.md, "Which position").
+    if (prep.tracking.on_tracked.available) {
+      c.has_tracked = true;
+      c.tracked.d = prep.tracking.on_tracked.d;
+      c.tracked.k = prep.tracking.on_tracked.k;
+    }
     if (!c.has_corrected && prep.pem.available) {
       c.has_corrected = true;
       c.corrected.d = prep.pem.d;
@@ -975,15 +984,20 @@ Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarP
 
 std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
   std::ostringstream o;
-  const auto corrected = [&](const char* label) {
-    o << "  " << label << ": D [" << g4(c.corrected.d(0, 0)) << " " << g4(c.corrected.d(0, 1)) << "; " << g4(c.corrected.d(1, 0)) << " "
-      << g4(c.corrected.d(1, 1)) << "] N s/m, K [" << g4(c.corrected.k(0, 0)) << " " << g4(c.corrected.k(0, 1)) << "; "
-      << g4(c.corrected.k(1, 0)) << " " << g4(c.corrected.k(1, 1)) << "] N/m\n";
+  const auto impedance = [&](const char* label, const PlanarImpedance& z) {
+    o << "  " << label << ": D [" << g4(z.d(0, 0)) << " " << g4(z.d(0, 1)) << "; " << g4(z.d(1, 0)) << " " << g4(z.d(1, 1)) << "] N s/m, K ["
+      << g4(z.k(0, 0)) << " " << g4(z.k(0, 1)) << "; " << g4(z.k(1, 0)) << " " << g4(z.k(1, 1)) << "] N/m\n";
   };
+  const auto corrected = [&](const char* label) { impedance(label, c.corrected); };
   o << "\nConclusion (decided by the " << (c.decided_by == "likelihood" ? "likelihood check" : "equation-error search") << "): ";
   if (!c.tracking_note.empty()) {
     o << "apparatus: " << c.tracking_note << "\n";
     if (c.has_corrected && c.named.empty()) corrected("corrected impedance (on the reference)");
+    if (c.has_tracked) {
+      impedance("with the tracking as a known force on the encoder (estimate_impedance --position-source tracked)", c.tracked);
+      o << "    (on simulated stages the reference's estimate was the closer while they lagged by less than ~50 um RMS, the tracked one "
+           "beyond: docs/estimator.md, \"Which position\"; no named cause's correction is in it)\n";
+    }
     o << "  On the reference: ";
   }
   if (c.named.empty()) {
@@ -1035,6 +1049,9 @@ nlohmann::json conclusion_json(const Conclusion& c) {
   if (c.has_corrected)
     j["corrected"] = {{"d_nspm", {{c.corrected.d(0, 0), c.corrected.d(0, 1)}, {c.corrected.d(1, 0), c.corrected.d(1, 1)}}},
                       {"k_npm", {{c.corrected.k(0, 0), c.corrected.k(0, 1)}, {c.corrected.k(1, 0), c.corrected.k(1, 1)}}}};
+  if (c.has_tracked)
+    j["tracked"] = {{"d_nspm", {{c.tracked.d(0, 0), c.tracked.d(0, 1)}, {c.tracked.d(1, 0), c.tracked.d(1, 1)}}},
+                    {"k_npm", {{c.tracked.k(0, 0), c.tracked.k(0, 1)}, {c.tracked.k(1, 0), c.tracked.k(1, 1)}}}};
   if (!c.protocol_note.empty()) j["protocol_note"] = c.protocol_note;
   return j;
 }

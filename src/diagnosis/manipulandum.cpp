@@ -14,6 +14,7 @@
 #include "manip/estimation/methods/method.hpp"
 #include "manip/estimation/methods/registry.hpp"
 #include "manip/estimation/pem.hpp"
+#include "manip/estimation/tracking_input.hpp"
 #include "manip/estimation/variational.hpp"
 #include "manip/model/arm.hpp"
 
@@ -421,6 +422,53 @@ std::vector<estimation::OeWindow> corrected_pem_windows(const PlanarPrepared& pr
   return pw;
 }
 
+namespace {
+// The default method on position "tracked", trial by trial as
+// SessionEstimator::prepare builds it (a trial it cannot use is left out, as
+// the estimator excludes it); the sessions are left as they are.
+PemBaseline fit_tracked(const std::vector<CollectedSession>& sessions, const PlanarOptions& opt) {
+  PlanarPrepared tp;
+  tp.info = sessions[0].info;
+  tp.settings = opt.estimator;
+  tp.settings.position = estimation::PositionSource::tracked;
+  tp.settings.methods = {estimation::default_method()};
+  const estimation::Method* method = estimation::find_method(tp.settings.methods[0]);
+  const bool want_oe = method && estimation::needs(method->windows(), estimation::DataWindow::output_error);
+  const bool want_pw = method && estimation::needs(method->windows(), estimation::DataWindow::prediction_error);
+  const auto& pipe = tp.settings.pipeline;
+  for (const auto& ses : sessions) {
+    const TwoLinkArm arm(ses.info.anthropometrics);
+    const int shift = estimation::reference_shift_for(ses.info.source);
+    for (const auto& t : ses.perturbed) {
+      try {
+        if (t.onset_index < 0) continue;
+        const auto m_bsp = arm.endpoint_inertia_at(t.x_m.at(static_cast<std::size_t>(t.onset_index)));
+        if (!m_bsp) continue;
+        const auto x_ref = estimation::aligned_reference(t, shift);
+        auto vw = estimation::isolate_variational(ses.info, t, pipe);
+        estimation::OeWindow ow, pw;
+        if (want_oe) ow = estimation::make_oe_window(ses.info, t, *m_bsp, tp.settings.oe);
+        if (want_pw) pw = estimation::make_pem_window(ses.info, t, *m_bsp, tp.settings.pem);
+        estimation::OeWindow* const w[] = {&ow, &pw};
+        estimation::add_tracking_input(ses.info, t, x_ref, pipe, vw, w);
+        tp.vw.push_back(std::move(vw));
+        tp.m_bsp.push_back(*m_bsp);
+        if (want_oe) tp.oe.push_back(std::move(ow));
+        if (want_pw) tp.pw.push_back(std::move(pw));
+      } catch (const std::exception&) {
+        continue;
+      }
+    }
+  }
+  if (tp.vw.empty()) {
+    PemBaseline r;
+    r.error = "no trial with a finite admittance reference";
+    return r;
+  }
+  return fit_default_method(tp);
+}
+}  // namespace
+
 PlanarPrepared prepare_planar_tracked(std::vector<CollectedSession>& sessions, const PlanarOptions& opt, int folds,
                                       const std::function<void(const std::string&)>& progress) {
   // prepare_planar consumes the sessions: keep them while the move is possible.
@@ -446,6 +494,7 @@ PlanarPrepared prepare_planar_tracked(std::vector<CollectedSession>& sessions, c
   sw.shift0 = ts.shift0;
   sw.shift1 = ts.shift1;
   sw.on_encoder = prep.pem;
+  if (opt.pem_baseline) sw.on_tracked = fit_tracked(kept, opt);
   if (progress) progress("the stages' tracking is most of eq. 21's disagreement with the force sensor: moving to the admittance reference");
   PlanarOptions on_ref = opt;
   on_ref.estimator.position = estimation::PositionSource::reference;
@@ -1604,12 +1653,17 @@ PlanarReport planar_report(const PlanarPrepared& prep, const Diagnosis& dg, cons
       << " left out). Eq. 21 holds for the reference, not the "
       << "encoder: everything in this report is on the reference (as --position-source reference)";
     if (sw.on_encoder.available) o << "; on the encoder the default method gave D " << mat(sw.on_encoder.d) << "  K " << mat(sw.on_encoder.k);
+    if (sw.on_tracked.available)
+      o << "; with the tracking as a known force on the encoder (estimate_impedance --position-source tracked) D " << mat(sw.on_tracked.d)
+        << "  K " << mat(sw.on_tracked.k);
     o << "\n";
     jt.update({{"rms_um", sw.rms_um}, {"share", sw.share}, {"coef", sw.coef}, {"heldout_share", sw.heldout_share},
                {"heldout_better_trials", sw.heldout_better}, {"trials", sw.trials}, {"shift0_trials", sw.shift0},
                {"shift1_trials", sw.shift1}});
     if (sw.on_encoder.available)
       jt["on_encoder"] = {{"D_Nspm", jmat(sw.on_encoder.d)}, {"K_Npm", jmat(sw.on_encoder.k)}};
+    if (sw.on_tracked.available)
+      jt["on_tracked"] = {{"D_Nspm", jmat(sw.on_tracked.d)}, {"K_Npm", jmat(sw.on_tracked.k)}};
   } else if (tr.trials == 0) {
     o << "  tracking: no admittance reference (x_ref) in the log\n";
   } else {

@@ -934,3 +934,42 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
     std::fflush(stdout);
   }
 }
+
+// A diagnosis moved to the reference by the stages' tracking, nothing else
+// named: the corrected impedance is the default method on the reference, and
+// the tracked estimate (the tracking as a known force on the encoder) is
+// given beside it, in the text and the JSON, never in its place.
+TEST_CASE("manipulandum: a conclusion moved by the tracking gives the reference estimate and the tracked one beside it") {
+  PlanarPrepared prep;
+  prep.tracking.switched = true;
+  prep.tracking.share = 0.95;
+  prep.tracking.rms_um = 140.0;
+  prep.pem.available = true;
+  prep.pem.d << 14.5, -9.7, -9.5, 6.0;
+  prep.pem.k << 83.4, -110.5, -110.5, 352.2;
+  prep.tracking.on_tracked.available = true;
+  prep.tracking.on_tracked.d << 13.1, -10.0, -8.8, 6.5;
+  prep.tracking.on_tracked.k << 97.0, -107.7, -107.7, 344.3;
+  const LikelihoodStage st;
+  const auto c = conclude(Diagnosis{}, st, prep);
+  REQUIRE(c.has_corrected);
+  CHECK(c.corrected.d == prep.pem.d);
+  REQUIRE(c.has_tracked);
+  CHECK(c.tracked.k == prep.tracking.on_tracked.k);
+  const auto text = conclusion_text(c, Diagnosis{});
+  CHECK(text.find("apparatus: the stages lag the admittance reference") != std::string::npos);
+  CHECK(text.find("corrected impedance (on the reference): D [14.5 -9.7; -9.5 6] N s/m, K [83.4 -110.5; -110.5 352.2] N/m") !=
+        std::string::npos);
+  CHECK(text.find("--position-source tracked): D [13.1 -10; -8.8 6.5] N s/m, K [97 -107.7; -107.7 344.3] N/m") != std::string::npos);
+  const auto j = conclusion_json(c);
+  CHECK(j["tracking"] == true);
+  CHECK(j["corrected"]["k_npm"][0][0] == 83.4);
+  CHECK(j["tracked"]["k_npm"][0][0] == 97.0);
+  CHECK(j["tracked"]["d_nspm"][1][0] == -8.8);
+  // Without the tracked fit (no likelihood method): no tracked estimate.
+  prep.tracking.on_tracked.available = false;
+  const auto c2 = conclude(Diagnosis{}, st, prep);
+  CHECK_FALSE(c2.has_tracked);
+  CHECK_FALSE(conclusion_json(c2).contains("tracked"));
+  CHECK(conclusion_text(c2, Diagnosis{}).find("--position-source tracked") == std::string::npos);
+}

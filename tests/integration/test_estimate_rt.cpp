@@ -212,7 +212,7 @@ TEST_CASE("manip_rt sim session: positions from the admittance reference recover
 TEST_CASE("manip_rt sim session with a 10 Hz PD: tracked recovers D and K where the encoder and the reference do not",
           "[estimator][session][full]") {
   if (kSanitized) {
-    WARN("skipped under sanitizers (full session + three estimations; covered by the Release run)");
+    WARN("skipped under sanitizers (full session + three estimations + a diagnosis preparation; covered by the Release run)");
     return;
   }
   const RtConfig cfg =
@@ -221,6 +221,7 @@ TEST_CASE("manip_rt sim session with a 10 Hz PD: tracked recovers D and K where 
   run_rendered(cfg, path);
   const Mat2 d_true = cfg.sim.human.d_nspm, k_true = cfg.sim.human.k_npm;
   double err_d[3] = {0, 0, 0}, err_k[3] = {0, 0, 0};
+  Mat2 tracked_d = Mat2::Zero(), tracked_k = Mat2::Zero();
   const est::PositionSource pos[3] = {est::PositionSource::encoder, est::PositionSource::reference, est::PositionSource::tracked};
   std::ostringstream msg;
   for (int i = 0; i < 3; ++i) {
@@ -229,13 +230,27 @@ TEST_CASE("manip_rt sim session with a 10 Hz PD: tracked recovers D and K where 
     REQUIRE(sm);
     CHECK(r.position_used == pos[i]);
     CHECK(r.n_used == 24);
+    if (pos[i] == est::PositionSource::tracked) {
+      tracked_d = sm->d_nspm;
+      tracked_k = sm->k_npm;
+    }
     err_d[i] = (sm->d_nspm - d_true).norm() / d_true.norm();
     err_k[i] = (sm->k_npm - k_true).norm() / k_true.norm();
     msg << est::to_string(pos[i]) << ": D " << fmt(sm->d_nspm) << " (" << err_d[i] << ")  K " << fmt(sm->k_npm) << " (" << err_k[i]
         << ")\n";
   }
+  // The diagnosis names the tracking, moves to the reference and gives the
+  // tracked estimate beside it: estimate_impedance's, to the digit.
+  std::vector<manip::diagnosis::CollectedSession> sessions;
+  sessions.push_back(manip::diagnosis::collect_log(path));
+  const auto prep = manip::diagnosis::prepare_planar_tracked(sessions, manip::diagnosis::PlanarOptions{}, 10);
   std::filesystem::remove(path);
   WARN(msg.str());
+  REQUIRE(prep.tracking.switched);
+  CHECK(prep.tracking.rms_um > 50.0);
+  REQUIRE(prep.tracking.on_tracked.available);
+  CHECK((prep.tracking.on_tracked.d - tracked_d).norm() < 1e-6 * d_true.norm());
+  CHECK((prep.tracking.on_tracked.k - tracked_k).norm() < 1e-6 * k_true.norm());
   CHECK(err_d[2] < 0.05);
   CHECK(err_k[2] < 0.03);
   CHECK(err_d[2] < err_d[0]);

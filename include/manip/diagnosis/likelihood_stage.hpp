@@ -183,6 +183,10 @@ struct Conclusion {
   // The stages' tracking, when run_planar moved the diagnosis to the
   // admittance reference (PlanarPrepared::tracking; empty otherwise).
   std::string tracking_note;
+  // Then also the default method with the tracking as a known force on the
+  // encoder (TrackingSwitch::on_tracked), without the named corrections.
+  bool has_tracked = false;
+  PlanarImpedance tracked;
 };
 [[nodiscard]] Conclusion conclude(const Diagnosis& dg, const LikelihoodStage& s, const PlanarPrepared& prep);
 [[nodiscard]] std::string conclusion_text(const Conclusion& c, const Diagnosis& dg);

@@ -139,6 +139,12 @@ struct TrackingSwitch {
   double rms_um = 0.0;             // x_ref − x RMS over the windows (TrackingSummary)
   int shift0 = 0, shift1 = 0;      // trials whose reference was aligned by 0 and by 1 sample
   PemBaseline on_encoder;          // the default method on the encoder
+  // The default method with the tracking as a known force on the loop, the
+  // encoder as the person's position (estimate_impedance --position-source
+  // tracked, estimation/tracking_input.hpp): the estimate to prefer when the
+  // stages lag far (docs/estimator.md, "Which position"). Reported beside
+  // the reference's; the search itself runs on the reference.
+  PemBaseline on_tracked;
 };
 // The rule: tracking takes at least this share of the disagreement, with a
 // coefficient within this distance of 1 (the header of sensor_delay.hpp),
