@@ -123,6 +123,16 @@ def run_one(build, base, cell, seed, noise, work, sources, diagnose, keep):
     return out
 
 
+def finish(results, work, keep):
+    """Lists the failed sessions, removes the temporary directory; the exit status."""
+    for r in results:
+        if "error" in r:
+            print("failed: PD %g Hz seed %d: %s" % (r["cell"], r["seed"], r["error"]))
+    if not keep:
+        shutil.rmtree(work, ignore_errors=True)
+    return 1 if any("error" in r for r in results) else 0
+
+
 def frob(e, t):
     return float(np.linalg.norm(e - t) / np.linalg.norm(t))
 
@@ -190,12 +200,7 @@ def main():
                 sum(diag_ok(k, k_true, 0.1) for _, k in es), len(es),
                 100 * med([frob(d, d_true) for d, _ in es]), 100 * med([frob(k, k_true) for _, k in es])))
     if a.no_diagnosis:
-        for r in results:
-            if "error" in r:
-                print("failed: PD %g Hz seed %d: %s" % (r["cell"], r["seed"], r["error"]))
-        if not a.keep:
-            shutil.rmtree(work, ignore_errors=True)
-        return 1 if any("error" in r for r in results) else 0
+        return finish(results, work, a.keep)
     print()
     print("| PD bandwidth | sessions | tracking named | coefficient within 0.2 of 1 (median) | held-out share > 0 (median) "
           "| RMS x_ref − x, median | also named | D within 20 % (Frobenius; D11, D22) | K within 10 % (Frobenius; K11, K22) "
@@ -227,12 +232,7 @@ def main():
             100 * med([frob(r["d"], d_true) for r in wd]), 100 * med([frob(r["k"], k_true) for r in wd]),
             sum(frob(r["d_enc"], d_true) <= 0.2 for r in we), len(we), sum(frob(r["k_enc"], k_true) <= 0.1 for r in we), len(we),
             100 * med([frob(r["d_enc"], d_true) for r in we]), 100 * med([frob(r["k_enc"], k_true) for r in we])))
-    for r in results:
-        if "error" in r:
-            print("failed: PD %g Hz seed %d: %s" % (r["cell"], r["seed"], r["error"]))
-    if not a.keep:
-        shutil.rmtree(work, ignore_errors=True)
-    return 1 if any("error" in r for r in results) else 0
+    return finish(results, work, a.keep)
 
 
 if __name__ == "__main__":
