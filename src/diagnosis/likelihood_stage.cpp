@@ -194,6 +194,11 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
   lc.heldout_done = true;
 }
 
+// D, K as JSON, each 2 x 2 row by row (the report's "corrected" and "tracked").
+nlohmann::json impedance_json(const PlanarImpedance& z) {
+  return {{"d_nspm", {{z.d(0, 0), z.d(0, 1)}, {z.d(1, 0), z.d(1, 1)}}}, {"k_npm", {{z.k(0, 0), z.k(0, 1)}, {z.k(1, 0), z.k(1, 1)}}}};
+}
+
 // A named mechanism's parameters, "name value [lo, hi] unit;" (the interval
 // for gains that have one), and as JSON by name (report.hpp's param_json).
 std::string params_text(const std::vector<ParamEstimate>& ps) {
@@ -836,10 +841,8 @@ nlohmann::json likelihood_json(const LikelihoodStage& s) {
     j["named_params_source"][f.id] = f.source.empty() ? "likelihood" : f.source;
   }
   if (s.misfit_found()) {
-    const auto z = s.impedance();
-    j["corrected"] = {{"method", s.fit.method},
-                      {"d_nspm", {{z.d(0, 0), z.d(0, 1)}, {z.d(1, 0), z.d(1, 1)}}},
-                      {"k_npm", {{z.k(0, 0), z.k(0, 1)}, {z.k(1, 0), z.k(1, 1)}}}};
+    j["corrected"] = impedance_json(s.impedance());
+    j["corrected"]["method"] = s.fit.method;
   }
   return j;
 }
@@ -1046,12 +1049,8 @@ nlohmann::json conclusion_json(const Conclusion& c) {
   j["alternatives"] = nlohmann::json::array();
   for (const auto& a : c.alternatives)
     j["alternatives"].push_back({{"for", a.named}, {"id", a.id}, {"gain", a.gain}, {"delay_s", a.delay_s}, {"why", a.why}});
-  if (c.has_corrected)
-    j["corrected"] = {{"d_nspm", {{c.corrected.d(0, 0), c.corrected.d(0, 1)}, {c.corrected.d(1, 0), c.corrected.d(1, 1)}}},
-                      {"k_npm", {{c.corrected.k(0, 0), c.corrected.k(0, 1)}, {c.corrected.k(1, 0), c.corrected.k(1, 1)}}}};
-  if (c.has_tracked)
-    j["tracked"] = {{"d_nspm", {{c.tracked.d(0, 0), c.tracked.d(0, 1)}, {c.tracked.d(1, 0), c.tracked.d(1, 1)}}},
-                    {"k_npm", {{c.tracked.k(0, 0), c.tracked.k(0, 1)}, {c.tracked.k(1, 0), c.tracked.k(1, 1)}}}};
+  if (c.has_corrected) j["corrected"] = impedance_json(c.corrected);
+  if (c.has_tracked) j["tracked"] = impedance_json(c.tracked);
   if (!c.protocol_note.empty()) j["protocol_note"] = c.protocol_note;
   return j;
 }

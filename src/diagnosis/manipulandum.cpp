@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <numbers>
 #include <sstream>
+#include <utility>
 
 #include "manip/common/errors.hpp"
 #include "manip/dsp/savgol.hpp"
@@ -252,6 +253,16 @@ void isolated_tracking(const estimation::SessionInfo& info, const estimation::Tr
 
 }  // namespace
 
+namespace {
+// Whether the default method reads the output-error and the prediction-error
+// windows (estimation::Method::windows).
+std::pair<bool, bool> default_method_windows() {
+  const estimation::Method* m = estimation::find_method(estimation::default_method());
+  return {m && estimation::needs(m->windows(), estimation::DataWindow::output_error),
+          m && estimation::needs(m->windows(), estimation::DataWindow::prediction_error)};
+}
+}  // namespace
+
 PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const PlanarOptions& opt, int folds) {
   if (sessions.empty()) throw InputError("no session log given");
   // The library's columns and the likelihood's corrections are built on one
@@ -285,9 +296,7 @@ PlanarPrepared prepare_planar(std::vector<CollectedSession>& sessions, const Pla
   out.info = info0;
   out.settings = opt.estimator;
   out.settings.methods = {estimation::default_method()};
-  const estimation::Method* method = estimation::find_method(out.settings.methods[0]);
-  const bool want_oe = method && estimation::needs(method->windows(), estimation::DataWindow::output_error);
-  const bool want_pw = method && estimation::needs(method->windows(), estimation::DataWindow::prediction_error);
+  const auto [want_oe, want_pw] = default_method_windows();
   for (auto& ses : sessions) {
     out.logs.push_back(ses.name);
     out.n_trials += ses.n_trials;
@@ -432,9 +441,7 @@ PemBaseline fit_tracked(const std::vector<CollectedSession>& sessions, const Pla
   tp.settings = opt.estimator;
   tp.settings.position = estimation::PositionSource::tracked;
   tp.settings.methods = {estimation::default_method()};
-  const estimation::Method* method = estimation::find_method(tp.settings.methods[0]);
-  const bool want_oe = method && estimation::needs(method->windows(), estimation::DataWindow::output_error);
-  const bool want_pw = method && estimation::needs(method->windows(), estimation::DataWindow::prediction_error);
+  const auto [want_oe, want_pw] = default_method_windows();
   const auto& pipe = tp.settings.pipeline;
   for (const auto& ses : sessions) {
     const TwoLinkArm arm(ses.info.anthropometrics);
