@@ -116,9 +116,12 @@ namespace {
 
 // Runs f(0..n-1) on up to hardware_concurrency threads (each `pem` fit is
 // independent and reads the prepared data only); the first exception is
-// rethrown here.
+// rethrown here. A call from inside one of its workers (a held-out fold's
+// shape search, inside the folds' loop) runs on that worker's thread: the
+// folds already occupy the cores.
+thread_local bool in_parallel_worker = false;
 void parallel_for(std::size_t n, const std::function<void(std::size_t)>& f) {
-  const std::size_t nt = std::min<std::size_t>(n, std::max(1u, std::thread::hardware_concurrency()));
+  const std::size_t nt = in_parallel_worker ? 1 : std::min<std::size_t>(n, std::max(1u, std::thread::hardware_concurrency()));
   if (nt <= 1) {
     for (std::size_t i = 0; i < n; ++i) f(i);
     return;
@@ -129,6 +132,7 @@ void parallel_for(std::size_t n, const std::function<void(std::size_t)>& f) {
   std::vector<std::thread> pool;
   for (std::size_t t = 0; t < nt; ++t)
     pool.emplace_back([&] {
+      in_parallel_worker = true;
       for (std::size_t i = next++; i < n; i = next++) {
         try {
           f(i);
@@ -143,24 +147,30 @@ void parallel_for(std::size_t n, const std::function<void(std::size_t)>& f) {
 }
 
 // Held-out check of one accepted candidate: folds of neighbouring trials;
-// per fold both models are fitted on the other trials (the candidate's
-// amplitude profiled there) and scored by the likelihood of the held-out
-// trials at those fits.
-// fit_at(α, trials, start): the default method with the accepted corrections
-// and the candidate's at amplitude α; corr_at(α, fit): the candidate's
-// correction at α as that fit has it.
-using FitAt = std::function<PemBaseline(double, const std::vector<std::size_t>*, const PemBaseline&)>;
-using CorrAt = std::function<Correction(double, const PemBaseline&)>;
+// per fold both models are fitted on the other trials and scored by the
+// likelihood of the held-out trials at those fits.
+// fit_fold(train, start): the model with the candidate, fitted on `train`
+// from `start` (its amplitude profiled there and, for a shaped candidate,
+// its shape searched there: the shape chosen on all trials let the
+// held-out trials pick it, docs/diagnosis.md, "Held-out shapes").
+struct FoldFit {
+  AmplitudeProfile pr;
+  Correction correction;  // the candidate's at pr.alpha, as pr.fit has it
+  std::vector<double> shape;
+  int evaluations = 0;  // `pem` fits
+};
+using FitFold = std::function<FoldFit(const std::vector<std::size_t>&, const PemBaseline&)>;
 // acc: the accepted corrections of the model without the candidate;
 // acc_with: theirs in the model with it (the accepted amplitudes refitted
 // jointly with the candidate, on all trials: nuisance parameters of both
 // models, one per accepted mechanism).
 void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc, const Correction& acc_with, const PemBaseline& start,
-                   const FitAt& fit_at, const CorrAt& corr_at, int fits_per_eval, LikelihoodCandidate& lc, int& evaluations) {
+                   const FitFold& fit_fold, bool shaped, LikelihoodCandidate& lc, int& evaluations) {
   const std::size_t n = prep.pw.size();
   if (folds < 3 || n < static_cast<std::size_t>(folds)) return;
   std::vector<double> gain(static_cast<std::size_t>(folds), std::numeric_limits<double>::quiet_NaN());
   std::vector<int> evals(static_cast<std::size_t>(folds), 0);
+  std::vector<std::vector<double>> shapes(static_cast<std::size_t>(folds));
   parallel_for(static_cast<std::size_t>(folds), [&](std::size_t ku) {
     const int k = static_cast<int>(ku);
     std::vector<std::size_t> train, test;
@@ -168,9 +178,10 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
     const PemBaseline base = fit_default_method(prep, acc.empty() ? nullptr : &acc, &train, &start);
     const bool joint = !acc_with.empty();  // the accepted amplitudes differ with the candidate
     const PemBaseline base_with = joint ? fit_default_method(prep, &acc_with, &train, &base) : base;
-    const auto pr = profile_amplitude([&](double a) { return fit_at(a, &train, base_with); }, base_with);
-    evals[ku] = (joint ? 2 : 1) + fits_per_eval * pr.evaluations;
-    if (!base.has_likelihood || !pr.fit.has_likelihood) return;
+    auto ff = fit_fold(train, base_with);
+    evals[ku] = (joint ? 2 : 1) + ff.evaluations;
+    shapes[ku] = std::move(ff.shape);
+    if (!base.has_likelihood || !ff.pr.fit.has_likelihood) return;
     auto test_nll = [&](const Correction* c, const PemBaseline& f) {
       const auto all = corrected_pem_windows(prep, c);
       std::vector<estimation::OeWindow> ws;
@@ -180,9 +191,9 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
       for (const double x : v) t += x;
       return t;
     };
-    const auto c_ext = add(acc_with, corr_at(pr.alpha, pr.fit));
+    const auto c_ext = add(acc_with, ff.correction);
     const double before = test_nll(acc.empty() ? nullptr : &acc, base);
-    const double after = test_nll(&c_ext, pr.fit);
+    const double after = test_nll(&c_ext, ff.pr.fit);
     gain[ku] = (before - after) / static_cast<double>(test.size());
   });
   for (std::size_t k = 0; k < gain.size(); ++k) {
@@ -190,6 +201,7 @@ void heldout_check(const PlanarPrepared& prep, int folds, const Correction& acc,
     if (!std::isfinite(gain[k])) return;  // a fold without a likelihood: no held-out check
     lc.fold_gain_nats.push_back(gain[k]);
   }
+  if (shaped) lc.fold_settings = std::move(shapes);
   lc.heldout = stats::one_sided_t(lc.fold_gain_nats);
   lc.heldout_done = true;
 }
@@ -456,44 +468,54 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
   Correction acc;
   std::vector<Accepted> acc_list;
   std::vector<bool> used(cands.size(), false);
-  for (std::size_t round = 0; round < cands.size(); ++round) {
-    LikelihoodRound rd;
-    std::vector<std::size_t> idx;
-    std::vector<std::size_t> todo;
-    for (std::size_t i = 0; i < cands.size(); ++i)
-      if (!used[i]) todo.push_back(i);
-    if (progress) progress("likelihood check, round " + std::to_string(round + 1) + ": profiling " + std::to_string(todo.size()) + " candidates");
+  // The likelihood's search of each candidate's shape (its plan's grid, a
+  // second stage along the first shape parameter, successive parabolic
+  // steps along it, then along the second): per candidate the best shape and
+  // its amplitude profile, fitted on `trials` (nullptr: all) with the
+  // accepted corrections `acc_in`, from `start`. The rounds run it on all
+  // trials; the held-out check again on each fold's training trials, so the
+  // held-out trials choose neither the shape nor the amplitude.
+  struct ShapeSearch {
+    std::vector<AmplitudeProfile> profiles;
+    std::vector<std::vector<double>> best_shape;
+    int evaluations = 0;
+  };
+  auto search_shapes = [&](const std::vector<const Cand*>& todo, const Correction& acc_in, const std::vector<std::size_t>* trials,
+                           const PemBaseline& start) {
+    ShapeSearch out;
     // One profile per (candidate, shape); each candidate keeps its best shape.
     std::vector<std::pair<std::size_t, std::size_t>> jobs;
     for (std::size_t t = 0; t < todo.size(); ++t)
-      for (std::size_t h = 0; h < cands[todo[t]].shapes.size(); ++h) jobs.emplace_back(t, h);
+      for (std::size_t h = 0; h < todo[t]->shapes.size(); ++h) jobs.emplace_back(t, h);
     std::vector<AmplitudeProfile> job_profiles(jobs.size());
     parallel_for(jobs.size(), [&](std::size_t j) {
-      Cand c = cands[todo[jobs[j].first]];
+      Cand c = *todo[jobs[j].first];
       if (c.shapes.size() > 1) set_shape(c, c.shapes[jobs[j].second]);  // one shape: set once, above
-      job_profiles[j] = profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+      job_profiles[j] = profile_amplitude([&](double a) { return fit_at(c, a, acc_in, trials, start); }, start, c.alpha_min);
     });
-    std::vector<AmplitudeProfile> profiles(todo.size());
+    auto& profiles = out.profiles;
+    profiles.assign(todo.size(), AmplitudeProfile{});
     std::vector<int> best_job(todo.size(), -1);
     for (std::size_t j = 0; j < jobs.size(); ++j) {
       const auto t = jobs[j].first;
-      st.evaluations += passes(cands[todo[t]]) * job_profiles[j].evaluations;
+      out.evaluations += passes(*todo[t]) * job_profiles[j].evaluations;
       if (best_job[t] < 0 || nll_of(job_profiles[j].fit) < nll_of(profiles[t].fit)) {
         best_job[t] = static_cast<int>(j);
         profiles[t] = job_profiles[j];
       }
     }
-    std::vector<std::vector<double>> best_shape(todo.size());
-    for (std::size_t t = 0; t < todo.size(); ++t) best_shape[t] = cands[todo[t]].shapes[jobs[static_cast<std::size_t>(best_job[t])].second];
+    auto& best_shape = out.best_shape;
+    best_shape.assign(todo.size(), {});
+    for (std::size_t t = 0; t < todo.size(); ++t) best_shape[t] = todo[t]->shapes[jobs[static_cast<std::size_t>(best_job[t])].second];
     // The shape searches below: one profile of candidate t at a shape, and
     // its bookkeeping (evaluations counted, the best profile and shape kept).
     auto profile_at = [&](std::size_t t, const std::vector<double>& shape) {
-      Cand c = cands[todo[t]];
+      Cand c = *todo[t];
       set_shape(c, shape);
-      return profile_amplitude([&](double a) { return fit_at(c, a, acc, nullptr, cur); }, cur, c.alpha_min);
+      return profile_amplitude([&](double a) { return fit_at(c, a, acc_in, trials, start); }, start, c.alpha_min);
     };
     auto keep_if_better = [&](std::size_t t, const AmplitudeProfile& pr, const std::vector<double>& shape) {
-      st.evaluations += passes(cands[todo[t]]) * pr.evaluations;
+      out.evaluations += passes(*todo[t]) * pr.evaluations;
       if (nll_of(pr.fit) < nll_of(profiles[t].fit)) {
         profiles[t] = pr;
         best_shape[t] = shape;
@@ -504,7 +526,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     std::vector<std::vector<std::pair<double, double>>> line(todo.size());
     for (std::size_t j = 0; j < jobs.size(); ++j) {
       const auto t = jobs[j].first;
-      const auto& sh = cands[todo[t]].shapes[jobs[j].second];
+      const auto& sh = todo[t]->shapes[jobs[j].second];
       const auto& b = best_shape[t];
       if (!sh.empty() && sh.size() == b.size() && std::equal(sh.begin() + 1, sh.end(), b.begin() + 1))
         line[t].emplace_back(sh[0], nll_of(job_profiles[j].fit));
@@ -515,7 +537,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     {
       std::vector<std::pair<std::size_t, std::vector<double>>> more;
       for (std::size_t t = 0; t < todo.size(); ++t)
-        for (const double v : cands[todo[t]].then_first) {
+        for (const double v : todo[t]->then_first) {
           std::vector<double> shape = best_shape[t];
           if (shape.empty()) break;
           shape[0] = v;
@@ -580,7 +602,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     {
       std::vector<std::pair<std::size_t, std::vector<double>>> side;
       for (std::size_t t = 0; t < todo.size(); ++t)
-        if (const double h = cands[todo[t]].second_step; h > 0 && best_shape[t].size() >= 2)
+        if (const double h = todo[t]->second_step; h > 0 && best_shape[t].size() >= 2)
           for (const double sgn : {-1.0, 1.0}) {
             auto sh = best_shape[t];
             sh[1] += sgn * h;
@@ -591,7 +613,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       std::vector<std::pair<std::size_t, std::vector<double>>> vertex;
       for (std::size_t m = 0; m + 1 < side.size(); m += 2) {
         const auto t = side[m].first;
-        const double h = cands[todo[t]].second_step, x0 = best_shape[t][1];
+        const double h = todo[t]->second_step, x0 = best_shape[t][1];
         const double fm = nll_of(got[m].fit), f0 = nll_of(profiles[t].fit), fp = nll_of(got[m + 1].fit);
         if (std::isfinite(fm) && std::isfinite(f0) && std::isfinite(fp) && fm + fp - 2 * f0 > 0) {
           const double v = stats::parabola_vertex(x0 - h, fm, x0, f0, x0 + h, fp);
@@ -607,6 +629,21 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       parallel_for(vertex.size(), [&](std::size_t m) { got_v[m] = profile_at(vertex[m].first, vertex[m].second); });
       for (std::size_t m = 0; m < vertex.size(); ++m) keep_if_better(vertex[m].first, got_v[m], vertex[m].second);
     }
+    return out;
+  };
+  for (std::size_t round = 0; round < cands.size(); ++round) {
+    LikelihoodRound rd;
+    std::vector<std::size_t> idx;
+    std::vector<std::size_t> todo;
+    for (std::size_t i = 0; i < cands.size(); ++i)
+      if (!used[i]) todo.push_back(i);
+    if (progress) progress("likelihood check, round " + std::to_string(round + 1) + ": profiling " + std::to_string(todo.size()) + " candidates");
+    std::vector<const Cand*> todo_c;
+    for (const auto i : todo) todo_c.push_back(&cands[i]);
+    auto searched = search_shapes(todo_c, acc, nullptr, cur);
+    st.evaluations += searched.evaluations;
+    const auto& profiles = searched.profiles;
+    const auto& best_shape = searched.best_shape;
     for (std::size_t t = 0; t < todo.size(); ++t) {
       const std::size_t i = todo[t];
       auto& c = cands[i];
@@ -703,11 +740,48 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     const Correction acc_with = joint.size() > 1 ? sum_of(joint, joint.size() - 1, joint_fit) : Correction{};
     if (folds > 0) {
       if (progress) progress("likelihood check: held-out trials for " + w.id + " (" + std::to_string(folds) + " folds)");
-      const auto& cw = cands[ci];
+      const bool shaped = cands[ci].shapes.size() > 1 || !cands[ci].then_first.empty();
       heldout_check(
           prep, folds, acc, acc_with, cur,
-          [&](double a, const std::vector<std::size_t>* trials, const PemBaseline& start) { return fit_at(cw, a, acc_with, trials, start); },
-          [&](double a, const PemBaseline& f) { return correction_of(cw, a, f); }, passes(cw), w, st.evaluations);
+          [&](const std::vector<std::size_t>& train, const PemBaseline& start) {
+            // A fold searches the shape near the full-data one: the first
+            // shape parameter at it and at the plan's grid values on either
+            // side (the others as found), then the rounds' parabolic steps
+            // and second-parameter steps on its training trials. Hidden
+            // reflex 0.5, 50 ms pulse, 10 folds: 515 `pem` fits in all, the
+            // whole grid per fold 763, the full-data shape 323 ("Held-out shapes").
+            Cand local = cands[ci];
+            if (shaped) {
+              const auto& s0 = cands[ci].setting;
+              double below = -std::numeric_limits<double>::infinity(), above = std::numeric_limits<double>::infinity();
+              auto consider = [&](double v) {
+                if (v < s0[0] - 1e-9) below = std::max(below, v);
+                if (v > s0[0] + 1e-9) above = std::min(above, v);
+              };
+              for (const auto& sh : cands[ci].shapes)
+                if (!sh.empty()) consider(sh[0]);
+              for (const double v : cands[ci].then_first) consider(v);
+              local.shapes = {s0};
+              for (const double v : {below, above})
+                if (std::isfinite(v)) {
+                  auto sh = s0;
+                  sh[0] = v;
+                  local.shapes.push_back(std::move(sh));
+                }
+              local.then_first.clear();
+            }
+            auto s = search_shapes({&local}, acc_with, &train, start);
+            FoldFit ff;
+            if (shaped) {
+              set_shape(local, s.best_shape[0]);
+              ff.shape = s.best_shape[0];
+            }
+            ff.pr = std::move(s.profiles[0]);
+            ff.correction = correction_of(local, ff.pr.alpha, ff.pr.fit);
+            ff.evaluations = s.evaluations;
+            return ff;
+          },
+          shaped, w, st.evaluations);
       if (round > 0 && w.heldout_done && !(w.heldout.p_value < alpha)) {
         w.heldout_rejected = true;
         rd.accepted = -1;
@@ -784,6 +858,15 @@ std::string likelihood_text(const LikelihoodStage& s) {
         std::snprintf(h, sizeof h, "     held out (%zu folds of trials): log-likelihood gain %+.3f +- %.3f nats per trial, p %.2g\n", c.fold_gain_nats.size(),
                       c.heldout.mean, c.heldout.se, c.heldout.p_value);
         o << h;
+        if (!c.fold_settings.empty() && !c.fold_settings[0].empty()) {
+          o << "     shape per fold (chosen on its training trials):";
+          for (std::size_t q = 0; q < c.fold_settings[0].size() && q < c.params.size(); ++q) {
+            o << (q ? ";" : "") << " " << c.params[q].name;
+            for (std::size_t f = 0; f < c.fold_settings.size(); ++f) o << (f ? ", " : " ") << (q < c.fold_settings[f].size() ? g4(c.fold_settings[f][q]) : "?");
+            o << " " << c.params[q].unit;
+          }
+          o << "\n";
+        }
       }
     }
   }
@@ -824,8 +907,10 @@ nlohmann::json likelihood_json(const LikelihoodStage& s) {
       nlohmann::json jc = {{"id", c.id}, {"lr", c.lr}, {"df", c.df}, {"p", c.p}, {"p_holm", c.p_holm}, {"alpha", c.alpha},
                            {"significant", c.significant}, {"plausible", c.plausible}, {"relevance", c.relevance}};
       if (!c.plausible) jc["implausible_reason"] = c.implausible_reason;
-      if (c.heldout_done)
+      if (c.heldout_done) {
         jc["heldout"] = {{"fold_gain_nats_per_trial", c.fold_gain_nats}, {"mean", c.heldout.mean}, {"se", c.heldout.se}, {"p", c.heldout.p_value}};
+        if (!c.fold_settings.empty()) jc["heldout"]["fold_settings"] = c.fold_settings;
+      }
       if (c.heldout_rejected) jc["heldout_rejected"] = true;
       for (const auto& p : c.params) jc["params"][p.name] = p.est.value;
       jr["candidates"].push_back(jc);

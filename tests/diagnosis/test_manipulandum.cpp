@@ -589,6 +589,17 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 with a 50 ms, 20 N puls
   const auto o = run_case(c);
   check_delayed_copy(c, o, "reflex_gain", 0.30, 0.15, 0.20);
   CHECK(frob(o.pem.k, o.k_intr) > 0.30);
+  // Each held-out fold searched the delay on its training trials
+  // (docs/diagnosis.md, "Held-out shapes"): ten delays, each near the hidden one.
+  const auto* f = o.named_fit("short_latency_reflex");
+  REQUIRE(f);
+  CHECK(f->heldout_done);
+  REQUIRE(f->fold_settings.size() == 10);
+  for (const auto& s : f->fold_settings) {
+    REQUIRE(s.size() == 1);
+    INFO("fold delay " << s[0] << ", hidden " << o.draw.reflex_delay_s);
+    CHECK(std::fabs(rel(s[0], o.draw.reflex_delay_s)) < 0.20);
+  }
 }
 
 // Feedback earlier than the model's T_est (docs/diagnosis.md, "Early

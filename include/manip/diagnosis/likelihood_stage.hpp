@@ -106,11 +106,15 @@ struct LikelihoodCandidate {
   PemBaseline fit;                    // default method at the optimum (accepted ones included)
   // Accepted candidates only: cross-validation over trials (folds of
   // neighbouring trials, as the equation-error search): per fold, both models
-  // fitted on the other trials (the amplitude profiled there), the held-out
+  // fitted on the other trials (the amplitude profiled there, and a shaped
+  // candidate's shape searched there as in the rounds), the held-out
   // trials' negative log-likelihood at those fits (pem.hpp,
   // window_neg_log_likelihood); gain = NLL_without − NLL_with per held-out
   // trial [nats], one-sided t over folds.
   std::vector<double> fold_gain_nats;
+  // The shape each fold's training trials chose (candidates whose plan
+  // profiles more than one shape; empty otherwise).
+  std::vector<std::vector<double>> fold_settings;
   stats::OneSidedT heldout;
   bool heldout_done = false;
   // From the second round on the held-out check decides: a further mechanism
