@@ -740,7 +740,7 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     const Correction acc_with = joint.size() > 1 ? sum_of(joint, joint.size() - 1, joint_fit) : Correction{};
     if (folds > 0) {
       if (progress) progress("likelihood check: held-out trials for " + w.id + " (" + std::to_string(folds) + " folds)");
-      const bool shaped = cands[ci].shapes.size() > 1 || !cands[ci].then_first.empty();
+      const bool shaped = (cands[ci].shapes.size() > 1 || !cands[ci].then_first.empty()) && !cands[ci].setting.empty();
       heldout_check(
           prep, folds, acc, acc_with, cur,
           [&](const std::vector<std::size_t>& train, const PemBaseline& start) {
