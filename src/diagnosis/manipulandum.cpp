@@ -251,9 +251,6 @@ void isolated_tracking(const estimation::SessionInfo& info, const estimation::Tr
   }
 }
 
-}  // namespace
-
-namespace {
 // Whether the default method reads the output-error and the prediction-error
 // windows (estimation::Method::windows).
 std::pair<bool, bool> default_method_windows() {
