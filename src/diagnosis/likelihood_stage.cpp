@@ -212,12 +212,13 @@ nlohmann::json impedance_json(const PlanarImpedance& z) {
 }
 
 // A named mechanism's parameters, "name value [lo, hi] unit;" (the interval
-// for gains that have one), and as JSON by name (report.hpp's param_json).
+// for gains and profiled shapes that have one, "<lo" or ">hi" where it
+// reaches beyond the points profiled), and as JSON by name (report.hpp's param_json).
 std::string params_text(const std::vector<ParamEstimate>& ps) {
   std::string o;
   for (const auto& p : ps) {
     o += " " + p.name + " " + g4(p.est.value);
-    if (!p.shape && p.est.hi > p.est.lo) o += " [" + g4(p.est.lo) + ", " + g4(p.est.hi) + "]";
+    if (p.est.hi > p.est.lo) o += " [" + std::string(p.lo_open ? "<" : "") + g4(p.est.lo) + ", " + (p.hi_open ? ">" : "") + g4(p.est.hi) + "]";
     o += " " + p.unit + ";";
   }
   return o;
@@ -478,6 +479,11 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
   struct ShapeSearch {
     std::vector<AmplitudeProfile> profiles;
     std::vector<std::vector<double>> best_shape;
+    // The profile along the first shape parameter at the best shape's
+    // others, (first parameter, NLL) per profiled point: the grid's,
+    // the second stage's and the parabolic steps' (empty when the second
+    // parameter's steps moved the others after them).
+    std::vector<std::vector<std::pair<double, double>>> first_profile;
     int evaluations = 0;
   };
   auto search_shapes = [&](const std::vector<const Cand*>& todo, const Correction& acc_in, const std::vector<std::size_t>* trials,
@@ -590,9 +596,14 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       for (std::size_t r = 0; r < refine.size(); ++r) {
         if (!std::isfinite(at[r])) continue;
         pts[r].emplace_back(at[r], nll_of(got[r].fit));
+        line[refine[r]].emplace_back(at[r], nll_of(got[r].fit));
         keep_if_better(refine[r], got[r], shapes[r]);
       }
     }
+    // The others at which `line` was profiled (the second parameter's steps below may move them).
+    std::vector<std::vector<double>> line_rest(todo.size());
+    for (std::size_t t = 0; t < todo.size(); ++t)
+      if (!best_shape[t].empty()) line_rest[t].assign(best_shape[t].begin() + 1, best_shape[t].end());
     // Along the second shape parameter at the best first (a plan's
     // second_step: the directional reflex's direction, profiled 45° apart):
     // ± the step, then the parabola's vertex between them when the three
@@ -629,6 +640,10 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       parallel_for(vertex.size(), [&](std::size_t m) { got_v[m] = profile_at(vertex[m].first, vertex[m].second); });
       for (std::size_t m = 0; m < vertex.size(); ++m) keep_if_better(vertex[m].first, got_v[m], vertex[m].second);
     }
+    out.first_profile.resize(todo.size());
+    for (std::size_t t = 0; t < todo.size(); ++t)
+      if (!best_shape[t].empty() && std::equal(best_shape[t].begin() + 1, best_shape[t].end(), line_rest[t].begin(), line_rest[t].end()))
+        out.first_profile[t] = std::move(line[t]);
     return out;
   };
   for (std::size_t round = 0; round < cands.size(); ++round) {
@@ -683,6 +698,25 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
       for (std::size_t s = 0; s < sp.size(); ++s) {
         const double v = c.setting[s];
         lc.params.push_back({sp[s].name, sp[s].unit, {v, v, v}, sp[s].plausible_lo, sp[s].plausible_hi, true, true});
+        // The first shape parameter's 95 % profile-likelihood interval (the
+        // reflexes' and the early feedback's delay): the amplitude, D, K and
+        // the noise model refitted at each profiled point, the other shape
+        // parameters at their best. Where the points profiled do not reach
+        // the threshold the end is open (the grid's neighbours are 5 ms off).
+        if (s == 0 && searched.first_profile[t].size() >= 3) {
+          std::vector<double> xs, fs;
+          for (const auto& [x, f] : searched.first_profile[t]) {
+            xs.push_back(x);
+            fs.push_back(f);
+          }
+          if (const auto ri = stats::signed_root_interval(xs, fs); ri.valid) {
+            auto& q = lc.params.back();
+            q.est.lo = std::min(ri.lo, v);
+            q.est.hi = std::max(ri.hi, v);
+            q.lo_open = ri.lo_open;
+            q.hi_open = ri.hi_open;
+          }
+        }
         if (lc.params.back().at_edge()) {
           lc.plausible = false;
           lc.implausible_reason = sp[s].name + " on the edge of its search range";
@@ -1112,7 +1146,8 @@ std::string conclusion_text(const Conclusion& c, const Diagnosis& dg) {
     profiled = profiled || src.empty();
     o << "  " << c.named[i] << ":" << params_text(c.named_params[i]) << source_note(src) << "\n";
   }
-  if (profiled) o << "  ([…]: 95 % profile-likelihood interval of the amplitude, the other named amplitudes fixed)\n";
+  if (profiled) o << "  ([…]: 95 % profile-likelihood interval of the amplitude, the other named amplitudes fixed; of a delay, its profile\n"
+                     "   over the delays searched, amplitude, D, K and noise refitted at each; <, >: beyond the delays searched)\n";
   if (c.has_corrected) corrected("corrected impedance");
   for (const auto& a : c.alternatives)
     o << "  or, for " << a.named << ": " << a.id << " of gain " << g4(a.gain) << " x the impedance at " << g4(a.delay_s * 1e3) << " ms (" << a.why

@@ -52,6 +52,7 @@ void sig_text(std::ostringstream& o, const Signatures& s) {
 
 nlohmann::json param_json(const ParamEstimate& p) {
   nlohmann::json j = {{"name", p.name}, {"unit", p.unit}, {"value", p.est.value}, {"ci95", {p.est.lo, p.est.hi}}};
+  if (p.lo_open || p.hi_open) j["ci95_open"] = {p.lo_open, p.hi_open};
   if (p.has_bounds) {
     j["plausible"] = {p.plausible_lo, p.plausible_hi};
     j["within_plausible"] = p.plausible();

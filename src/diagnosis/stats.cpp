@@ -5,6 +5,7 @@
 #include <limits>
 #include <numeric>
 #include <stdexcept>
+#include <utility>
 
 namespace manip::diagnosis::stats {
 namespace {
@@ -265,6 +266,66 @@ ProfileInterval profile_interval(std::span<const double> a, std::span<const doub
   // chi2_1 quantile = z², z the two-sided normal quantile.
   const double z = norm_isf(0.5 * (1.0 - level));
   out.half_width = std::sqrt(z * z / (2.0 * curv));
+  return out;
+}
+
+RootInterval signed_root_interval(std::span<const double> x, std::span<const double> nll, double level) {
+  RootInterval out;
+  std::vector<std::pair<double, double>> pt;
+  for (std::size_t i = 0; i < x.size() && i < nll.size(); ++i)
+    if (std::isfinite(x[i]) && std::isfinite(nll[i])) pt.emplace_back(x[i], nll[i]);
+  std::sort(pt.begin(), pt.end());
+  // A point profiled twice (the same abscissa): its lower NLL.
+  std::vector<std::pair<double, double>> p;
+  for (const auto& q : pt)
+    if (!p.empty() && q.first == p.back().first)
+      p.back().second = std::min(p.back().second, q.second);
+    else
+      p.push_back(q);
+  if (p.size() < 2) return out;
+  std::size_t b = 0;
+  for (std::size_t i = 1; i < p.size(); ++i)
+    if (p[i].second < p[b].second) b = i;
+  double xc = p[b].first, fmin = p[b].second;
+  if (b > 0 && b + 1 < p.size()) {
+    const auto& [xa, fa] = p[b - 1];
+    const auto& [xb, fb] = p[b];
+    const auto& [xd, fd] = p[b + 1];
+    const double v = parabola_vertex(xa, fa, xb, fb, xd, fd);
+    // The parabola in Newton's form, f(x) = fb + d1 (x − xb) + c (x − xb)(x − xd),
+    // c the second divided difference (its curvature).
+    const double d1 = (fd - fb) / (xd - xb), c = (d1 - (fb - fa) / (xb - xa)) / (xd - xa);
+    if (std::isfinite(v) && v > xa && v < xd && c > 0) {
+      xc = v;
+      fmin = std::min(fb, fb + d1 * (v - xb) + c * (v - xb) * (v - xd));
+    }
+  }
+  const double z = norm_isf(0.5 * (1.0 - level));
+  auto root = [&](double f) { return std::sqrt(2.0 * std::max(0.0, f - fmin)); };
+  // Walk away from the centre on one side (dir +1: increasing x) until the
+  // root reaches z; interpolate linearly in the root from the last point short of it.
+  auto walk = [&](int dir, double& end, bool& open) {
+    double px = xc, pr = 0.0;
+    open = true;
+    end = xc;
+    const auto n = static_cast<std::ptrdiff_t>(p.size());
+    for (std::ptrdiff_t k = 0; k < n; ++k) {
+      const auto& [xi, fi] = p[static_cast<std::size_t>(dir > 0 ? k : n - 1 - k)];
+      if (dir > 0 ? !(xi > xc) : !(xi < xc)) continue;
+      const double ri = root(fi);
+      if (ri >= z) {
+        end = ri > pr ? px + (z - pr) / (ri - pr) * (xi - px) : xi;
+        open = false;
+        return;
+      }
+      px = xi;
+      pr = ri;
+      end = xi;
+    }
+  };
+  walk(+1, out.hi, out.hi_open);
+  walk(-1, out.lo, out.lo_open);
+  out.valid = true;
   return out;
 }
 

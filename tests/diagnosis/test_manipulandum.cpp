@@ -20,6 +20,7 @@
 #include "hidden_case.hpp"
 #include "manip/diagnosis/likelihood_stage.hpp"
 #include "manip/diagnosis/manipulandum.hpp"
+#include "manip/diagnosis/report.hpp"
 #include "manip/dsp/butterworth.hpp"
 #include "manip/dsp/integrate.hpp"
 #include "manip/dsp/savgol.hpp"
@@ -600,6 +601,27 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 with a 50 ms, 20 N puls
     INFO("fold delay " << s[0] << ", hidden " << o.draw.reflex_delay_s);
     CHECK(std::fabs(rel(s[0], o.draw.reflex_delay_s)) < 0.20);
   }
+  // The delay's 95 % profile-likelihood interval (its profile over the
+  // delays searched, "The delay's interval"): it holds the hidden delay,
+  // reaches past the named one on the side the search profiled beyond it,
+  // and is a few ms wide, not the grid's 5 ms steps either way. An end at the
+  // search's lowest delay (25 ms) is open there, not invented below it.
+  const ParamEstimate* delay = nullptr;
+  for (const auto& p : f->params)
+    if (p.name == "delay") delay = &p;
+  REQUIRE(delay);
+  INFO("delay " << delay->est.value << " [" << delay->est.lo << (delay->lo_open ? " open" : "") << ", " << delay->est.hi
+                << (delay->hi_open ? " open" : "") << "], hidden " << o.draw.reflex_delay_s);
+  CHECK(delay->est.lo <= o.draw.reflex_delay_s);
+  CHECK(delay->est.hi >= o.draw.reflex_delay_s);
+  CHECK(delay->est.hi > delay->est.value);
+  CHECK_FALSE(delay->hi_open);
+  CHECK(delay->est.hi - delay->est.lo < 0.006);
+  if (delay->lo_open) CHECK(delay->est.lo == Approx(0.025).margin(1e-9));
+  // The report prints it: text "delay 0.0… [lo, hi] s", JSON ci95 (and ci95_open where open).
+  const auto j = param_json(*delay);
+  CHECK(j["ci95"][1] == delay->est.hi);
+  CHECK(j.contains("ci95_open") == (delay->lo_open || delay->hi_open));
 }
 
 // Feedback earlier than the model's T_est (docs/diagnosis.md, "Early
@@ -831,8 +853,8 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
     std::string t;
     while (std::getline(ss, t, ',')) cells.push_back(t);
   }
-  std::printf("| hidden | sessions | named first | all named | main param within 20 %% | held-out gain > 0 | K within 10 %% | D within 20 %% | K11, K22 within 10 %% | D11, D22 within 20 %% | K within 10 %%, no extension | D within 20 %%, no extension | false names | median main err | above detection limit | median limit / magnitude | reflex as the alternative, gain within 30 %% |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("| hidden | sessions | named first | all named | main param within 20 %% | held-out gain > 0 | K within 10 %% | D within 20 %% | K11, K22 within 10 %% | D11, D22 within 20 %% | K within 10 %%, no extension | D within 20 %%, no extension | false names | median main err | above detection limit | median limit / magnitude | reflex as the alternative, gain within 30 %% | main param in its 95 %% interval |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& cell : cells) {
     std::vector<sim::HiddenEffect> eff;
     if (cell != "none") {
@@ -842,7 +864,7 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
     }
     int first = 0, all = 0, mainok = 0, gain = 0, kok = 0, dok = 0, falsen = 0, kf = 0, df = 0, k0 = 0, d0 = 0;
     std::vector<double> errs, ratio;
-    int above = 0, alt = 0;
+    int above = 0, alt = 0, covered = 0, with_interval = 0;
     for (int s = 0; s < seeds; ++s) {
       Case c;
       c.effects = eff;
@@ -932,6 +954,10 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
             const double er = std::fabs(rel(p.est.value, mp.truth));
             errs.push_back(er);
             if (er < 0.2) ++mainok;
+            if (p.est.hi > p.est.lo) {
+              ++with_interval;
+              if (mp.truth >= p.est.lo && mp.truth <= p.est.hi) ++covered;
+            }
           }
         if (f->heldout_done && f->heldout.mean > 0) ++gain;
       }
@@ -941,12 +967,13 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
     std::sort(ratio.begin(), ratio.end());
     const double medr = ratio.empty() ? NAN : ratio[ratio.size() / 2];
     if (eff.empty())
-      std::printf("| none | %d | no false alarm %d/%d | | | | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d | | | | |\n", seeds, seeds - falsen, seeds, kf, seeds,
+      std::printf("| none | %d | no false alarm %d/%d | | | | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d | | | | | |\n", seeds, seeds - falsen, seeds, kf, seeds,
                   df, seeds, kok, seeds, dok, seeds, k0, seeds, d0, seeds, falsen);
     else
-      std::printf("| %s | %d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d | %.3f | %d/%d | %.2f | %s |\n", cell.c_str(), seeds, first, seeds, all,
+      std::printf("| %s | %d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d/%d | %d | %.3f | %d/%d | %.2f | %s | %d/%d |\n", cell.c_str(), seeds, first, seeds, all,
                   seeds, mainok, seeds, gain, seeds, kf, seeds, df, seeds, kok, seeds, dok, seeds, k0, seeds, d0, seeds, falsen, med, above, seeds, medr,
-                  eff.front().mechanism == sim::HiddenMechanism::reflex ? (std::to_string(alt) + "/" + std::to_string(seeds)).c_str() : "");
+                  eff.front().mechanism == sim::HiddenMechanism::reflex ? (std::to_string(alt) + "/" + std::to_string(seeds)).c_str() : "", covered,
+                  with_interval);
     std::fflush(stdout);
   }
 }

@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -100,6 +101,56 @@ TEST_CASE("profile-likelihood interval of a parabolic profile", "[diagnosis][sta
     CHECK(std::isnan(stats::profile_interval(a2, y2).half_width));
     const std::vector<double> one = {0.5}, y1 = {1.0};
     CHECK(std::isnan(stats::profile_interval(one, y1).half_width));
+  }
+}
+
+TEST_CASE("stats: signed_root_interval of a profile sampled far apart") {
+  // NLL(x) = 100 + 40 (x - 0.7)^2: {x : 2 (NLL - min) <= chi2_1(0.95)} is
+  // 0.7 +- sqrt(3.841458820694124 / 80) (scipy.stats.chi2.ppf(0.95, 1)); the
+  // signed root is linear in x, so interpolating it between points 0.5 and
+  // 0.7 apart is exact.
+  const double half = std::sqrt(3.841458820694124 / 80.0);
+  auto nll = [](double x) { return 100.0 + 40.0 * (x - 0.7) * (x - 0.7); };
+  SECTION("points on both sides, unsorted, one profiled twice") {
+    const std::vector<double> x = {1.5, 0.0, 0.8, 0.5, 0.8};
+    std::vector<double> y;
+    for (const double v : x) y.push_back(nll(v));
+    y[4] += 0.3;  // the same point profiled again, worse: the better one counts
+    const auto ri = stats::signed_root_interval(x, y);
+    REQUIRE(ri.valid);
+    CHECK(ri.lo == Approx(0.7 - half).epsilon(1e-12));
+    CHECK(ri.hi == Approx(0.7 + half).epsilon(1e-12));
+    CHECK_FALSE(ri.lo_open);
+    CHECK_FALSE(ri.hi_open);
+    const auto r99 = stats::signed_root_interval(x, y, 0.99);
+    CHECK(r99.hi - 0.7 == Approx(half * 2.5758293035489004 / 1.959963984540054).epsilon(1e-9));
+  }
+  SECTION("no point far enough on one side: that end open at the outermost point") {
+    const std::vector<double> x = {0.0, 0.5, 0.7, 0.8};
+    std::vector<double> y;
+    for (const double v : x) y.push_back(nll(v));
+    const auto ri = stats::signed_root_interval(x, y);
+    REQUIRE(ri.valid);
+    CHECK(ri.lo == Approx(0.7 - half).epsilon(1e-12));
+    CHECK_FALSE(ri.lo_open);
+    CHECK(ri.hi == 0.8);
+    CHECK(ri.hi_open);
+  }
+  SECTION("the best point outermost: the centre is that point, the root taken from its NLL") {
+    // Points 0, 0.5, 1.0 of a parabola centred at 1.2: NLL(0.5) - NLL(1.0) =
+    // 40 (0.49 - 0.04) = 18, root 6, so the lower end is 1.0 - 0.5 z / 6, z =
+    // 1.959963984540054 (scipy.stats.norm.isf(0.025)).
+    auto g = [](double x) { return 3.0 + 40.0 * (x - 1.2) * (x - 1.2); };
+    const std::vector<double> x = {0.0, 0.5, 1.0}, y = {g(0.0), g(0.5), g(1.0)};
+    const auto ri = stats::signed_root_interval(x, y);
+    REQUIRE(ri.valid);
+    CHECK(ri.lo == Approx(1.0 - 0.5 * 1.959963984540054 / 6.0).epsilon(1e-12));
+    CHECK(ri.hi == 1.0);
+    CHECK(ri.hi_open);
+  }
+  SECTION("fewer than two finite points: none") {
+    const std::vector<double> x = {0.1, 0.2}, y = {1.0, std::numeric_limits<double>::quiet_NaN()};
+    CHECK_FALSE(stats::signed_root_interval(x, y).valid);
   }
 }
 

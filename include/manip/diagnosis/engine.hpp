@@ -77,6 +77,9 @@ struct ParamEstimate {
   double plausible_lo = 0.0, plausible_hi = 0.0;
   bool has_bounds = false;
   bool shape = false;  // searched on a grid bounded by [plausible_lo, plausible_hi]
+  // An interval end beyond the points profiled (a shape's profile
+  // likelihood, stats::signed_root_interval): the end is at least that far out.
+  bool lo_open = false, hi_open = false;
   [[nodiscard]] bool plausible() const {
     return !has_bounds || (est.value >= plausible_lo && est.value <= plausible_hi);
   }

@@ -96,7 +96,11 @@ struct LikelihoodCandidate {
   double relevance = 0.0;
   // Shape params, then α × gains with the 95 % profile-likelihood interval of
   // α (stats::profile_interval; for accepted candidates after the joint
-  // refit, each amplitude's profile with the others fixed).
+  // refit, each amplitude's profile with the others fixed). The first shape
+  // parameter of a plan-profiled candidate (the reflexes' and the early
+  // feedback's delay) has the interval of its own profile over the values
+  // searched, the amplitude refitted at each (stats::signed_root_interval;
+  // lo_open / hi_open where it reaches past them); other shapes lo = hi.
   std::vector<ParamEstimate> params;
   // Where an accepted candidate's parameters come from when not from its
   // amplitude profile: "force sensor" for a named actuation delay whose

@@ -66,6 +66,24 @@ struct ProfileInterval {
 };
 [[nodiscard]] ProfileInterval profile_interval(std::span<const double> a, std::span<const double> nll, double level = 0.95);
 
+// Profile-likelihood interval of a parameter profiled at a few points that
+// need not lie on one parabola (the reflex's delay: a 5 ms grid, then
+// parabolic steps near the best): {x : 2 (NLL(x) − NLL*) ≤ chi2_1(level)}
+// (Wilks), its ends found by linear interpolation of the signed root
+// r(x) = ±sqrt(2 (NLL(x) − NLL*)) between neighbouring points, exact when the
+// profile is a parabola however far apart the points are. NLL* and the
+// centre are the vertex of the parabola through the best point and its two
+// neighbours when it bends upwards there (else the best point). An end the
+// points do not reach (no point beyond it with r ≥ z) is open: set to the
+// outermost point on that side. valid is false with fewer than two finite
+// points.
+struct RootInterval {
+  double lo = 0.0, hi = 0.0;
+  bool lo_open = false, hi_open = false;
+  bool valid = false;
+};
+[[nodiscard]] RootInterval signed_root_interval(std::span<const double> x, std::span<const double> nll, double level = 0.95);
+
 // Percentile of a sample (linear interpolation between order statistics, numpy's default).
 [[nodiscard]] double percentile(std::vector<double> x, double q_percent);
 
