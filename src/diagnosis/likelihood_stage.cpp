@@ -361,27 +361,50 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     }
   };
   // The default method with the accepted corrections and the candidate's at
-  // α. A model-based correction depends on the D, K it is simulated at: two
-  // passes (at the start's D, K, then at the first fit's): measured on a
-  // hidden 3 ms lag from the uncorrected fit, the second pass moves the LR
-  // by up to 7, a third by ≤ 0.2 (docs/diagnosis.md, "Model-based corrections").
-  auto passes = [](const Cand& c) { return c.model_based ? 2 : 1; };  // `pem` fits per profile point
-  // The second pass simulates at the D, K the mechanism steps to from the
-  // first (Mechanism::next_reference: the fit itself, or the reflex's fixed point).
-  auto fit_at = [&](const Cand& c, double a, const Correction& acc_in, const std::vector<std::size_t>* trials, const PemBaseline& start) {
-    PemBaseline f = start, ref = start;
-    for (int pass = 0; pass < passes(c); ++pass) {
+  // α. A model-based correction depends on the D, K it is simulated at, and
+  // the fit's D, K on the correction: passes until the reference settles
+  // (a fixed point). Each pass simulates at the D, K the mechanism steps to
+  // from the last fit (Mechanism::next_reference: the fit itself, or the
+  // reflex's fixed point). The fixed two passes before stopped short of the
+  // reflex's: hidden reflex 1.0, 50 ms pulse, every named delay 1.1-3.0 ms
+  // short of the hidden one (seeds 5000-5009), 2/3/4 passes −2.8/−1.2/−0.5 ms
+  // on seed 5000 (docs/diagnosis.md, "Passes to the fixed point"). Settled:
+  // D and K each move by under kSettled of their norm. A move that grows is
+  // no contraction (the reflex at α = 3, seed 5000: K11 135, −21, −102,
+  // −155 N/m, the NLL rising from the second pass): the passes stop there.
+  // The lowest-NLL pass is the point's fit.
+  constexpr int kMaxPasses = 6;
+  constexpr double kSettled = 0.01;
+  auto fit_at = [&](const Cand& c, double a, const Correction& acc_in, const std::vector<std::size_t>* trials, const PemBaseline& start,
+                    int& fits) {
+    PemBaseline f = start, ref = start, best;
+    double last_move = std::numeric_limits<double>::infinity();
+    for (int pass = 0;; ++pass) {
       const auto corr = add(acc_in, correction_of(c, a, ref));
       auto next = fit_default_method(prep, &corr, trials, &f);
-      if (!next.available || !next.has_likelihood) return next;
+      ++fits;
+      if (!next.available || !next.has_likelihood) return pass == 0 ? next : best;
       f = std::move(next);
-      if (pass + 1 < passes(c)) {
-        PemBaseline step = f;
-        c.mech->next_reference(prep.data, c.setting, gains_scaled(c, a), ref.d, ref.k, step.d, step.k);
-        ref = std::move(step);
-      }
+      if (!(nll_of(best) <= nll_of(f))) best = f;
+      if (!c.model_based || a == 0.0 || pass + 1 >= kMaxPasses) break;
+      PemBaseline step = f;
+      c.mech->next_reference(prep.data, c.setting, gains_scaled(c, a), ref.d, ref.k, step.d, step.k);
+      const double move = std::max((step.k - ref.k).norm() / std::max(ref.k.norm(), 1e-9), (step.d - ref.d).norm() / std::max(ref.d.norm(), 1e-9));
+      if (!(move < last_move)) break;
+      ref = std::move(step);
+      if (move < kSettled) break;
+      last_move = move;
     }
-    return f;
+    return best;
+  };
+  // The amplitude profile of candidate c (profile_amplitude), its
+  // evaluations counted in `pem` fits (a model-based one's passes included).
+  auto profile_of = [&](const Cand& c, const Correction& acc_in, const std::vector<std::size_t>* trials, const PemBaseline& start,
+                        double alpha_min) {
+    int fits = 0;
+    auto pr = profile_amplitude([&](double a) { return fit_at(c, a, acc_in, trials, start, fits); }, start, alpha_min);
+    pr.evaluations = fits;
+    return pr;
   };
 
   // The accepted mechanisms with their amplitudes; their correction at the
@@ -447,8 +470,9 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
         const auto others = sum_of(list, j, fit);
         const double a0 = list[j].alpha, step = 0.5 * std::max(std::fabs(a0), 0.2);
         const auto& c = cands[list[j].cand];
-        const auto pr = profile_amplitude([&](double t) { return fit_at(c, a0 + t * step, others, nullptr, fit); }, fit);
-        st.evaluations += passes(c) * pr.evaluations;
+        int fits = 0;
+        const auto pr = profile_amplitude([&](double t) { return fit_at(c, a0 + t * step, others, nullptr, fit, fits); }, fit);
+        st.evaluations += fits;
         list[j].half_width = pr.half_width * step;
         if (!(nll_of(pr.fit) < nll_of(fit))) continue;
         list[j].alpha = a0 + pr.alpha * step;
@@ -497,14 +521,14 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     parallel_for(jobs.size(), [&](std::size_t j) {
       Cand c = *todo[jobs[j].first];
       if (c.shapes.size() > 1) set_shape(c, c.shapes[jobs[j].second]);  // one shape: set once, above
-      job_profiles[j] = profile_amplitude([&](double a) { return fit_at(c, a, acc_in, trials, start); }, start, c.alpha_min);
+      job_profiles[j] = profile_of(c, acc_in, trials, start, c.alpha_min);
     });
     auto& profiles = out.profiles;
     profiles.assign(todo.size(), AmplitudeProfile{});
     std::vector<int> best_job(todo.size(), -1);
     for (std::size_t j = 0; j < jobs.size(); ++j) {
       const auto t = jobs[j].first;
-      out.evaluations += passes(*todo[t]) * job_profiles[j].evaluations;
+      out.evaluations += job_profiles[j].evaluations;
       if (best_job[t] < 0 || nll_of(job_profiles[j].fit) < nll_of(profiles[t].fit)) {
         best_job[t] = static_cast<int>(j);
         profiles[t] = job_profiles[j];
@@ -518,10 +542,10 @@ LikelihoodStage likelihood_stage(const PlanarPrepared& prep, const Diagnosis& dg
     auto profile_at = [&](std::size_t t, const std::vector<double>& shape) {
       Cand c = *todo[t];
       set_shape(c, shape);
-      return profile_amplitude([&](double a) { return fit_at(c, a, acc_in, trials, start); }, start, c.alpha_min);
+      return profile_of(c, acc_in, trials, start, c.alpha_min);
     };
     auto keep_if_better = [&](std::size_t t, const AmplitudeProfile& pr, const std::vector<double>& shape) {
-      out.evaluations += passes(*todo[t]) * pr.evaluations;
+      out.evaluations += pr.evaluations;
       if (nll_of(pr.fit) < nll_of(profiles[t].fit)) {
         profiles[t] = pr;
         best_shape[t] = shape;
