@@ -222,6 +222,13 @@ inline double check_main_param(const sim::HiddenEffect& e, const Outcome& o) {
   return v;
 }
 
+// A named candidate's parameter by name (nullptr: it has none of that name).
+inline const ParamEstimate* param_named(const LikelihoodCandidate& f, const std::string& name) {
+  for (const auto& p : f.params)
+    if (p.name == name) return &p;
+  return nullptr;
+}
+
 // A hidden delayed copy (the reflex, the early feedback) and what its
 // extension separates: named first, its delay within 20 % with a positive
 // held-out gain, its gain against the intrinsic D, K (`gain_name`) within
@@ -236,9 +243,8 @@ inline void check_delayed_copy(const Case& c, const Outcome& o, const std::strin
   check_main_param(e, o);
   const auto* f = o.named_fit(id);
   REQUIRE(f);
-  double g = NAN;
-  for (const auto& p : f->params)
-    if (p.name == gain_name) g = p.est.value;
+  const auto* gp = param_named(*f, gain_name);
+  const double g = gp ? gp->est.value : NAN;
   INFO(gain_name << " " << g);
   CHECK(std::fabs(rel(g, e.magnitude)) < gain_tol);
   REQUIRE(o.concl.has_corrected);

@@ -606,9 +606,7 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 with a 50 ms, 20 N puls
   // reaches past the named one on the side the search profiled beyond it,
   // and is a few ms wide, not the grid's 5 ms steps either way. An end at the
   // search's lowest delay (25 ms) is open there, not invented below it.
-  const ParamEstimate* delay = nullptr;
-  for (const auto& p : f->params)
-    if (p.name == "delay") delay = &p;
+  const auto* delay = param_named(*f, "delay");
   REQUIRE(delay);
   INFO("delay " << delay->est.value << " [" << delay->est.lo << (delay->lo_open ? " open" : "") << ", " << delay->est.hi
                 << (delay->hi_open ? " open" : "") << "], hidden " << o.draw.reflex_delay_s);
@@ -650,9 +648,7 @@ TEST_CASE("manipulandum: hidden strong reflex 1.0, noise-free - passes to the fi
   CHECK(o.concl.named.front() == "short_latency_reflex");
   const auto* f = o.named_fit("short_latency_reflex");
   REQUIRE(f);
-  const ParamEstimate* delay = nullptr;
-  for (const auto& p : f->params)
-    if (p.name == "delay") delay = &p;
+  const auto* delay = param_named(*f, "delay");
   REQUIRE(delay);
   REQUIRE(o.concl.has_corrected);
   INFO("delay " << delay->est.value << ", hidden " << o.draw.reflex_delay_s << "; K after " << show(o.concl.corrected.k) << ", D after "
@@ -716,9 +712,8 @@ TEST_CASE("manipulandum: hidden directional reflex 1.0 is named - direction, del
   const auto* f = o.named_fit("directional_reflex");
   REQUIRE(f);
   CHECK(f->fold_settings.size() == 5);
-  double psi = NAN;
-  for (const auto& p : f->params)
-    if (p.name == "direction") psi = p.est.value;
+  const auto* dir = param_named(*f, "direction");
+  const double psi = dir ? dir->est.value : NAN;
   const double err = std::remainder(psi - o.draw.reflex_direction_rad, 2 * std::numbers::pi);
   INFO("direction " << psi << " rad, hidden " << o.draw.reflex_direction_rad << " rad");
   CHECK(std::fabs(err) < std::numbers::pi / 4);
