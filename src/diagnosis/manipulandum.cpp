@@ -1302,12 +1302,7 @@ class PlanarReflex final : public Mechanism {
 // Shoulder/elbow short-latency stretch reflex: EMG latency 20-45 ms, force
 // ~10 ms later (Lee & Tatton 1975; Pruszynski & Scott 2012): 20-60 ms. A
 // shorter delay makes the delayed column a finite difference of the
-// baseline's that fits any smooth model error. The likelihood's profile
-// starts at that lower bound, so that a delay named at 25 ms has a
-// neighbour below it for the parabolic steps and its interval (from 25 ms
-// it had neither: hidden reflex 1.0 at 26.1-27.6 ms was named at 25 ms with
-// the lower end open, 3 of 10 sessions; docs/diagnosis.md, "The profile
-// from 20 ms"); a best at 20 ms itself is on the edge (implausible).
+// baseline's that fits any smooth model error.
 DelayedCopySpec short_latency_reflex_spec() {
   return {"short_latency_reflex",
           "short-latency reflex: g [D Δẋ(t - tau) + K Δx(t - tau)], a delayed copy of the impedance",
@@ -1316,7 +1311,7 @@ DelayedCopySpec short_latency_reflex_spec() {
           0.020,
           0.060,
           0.001,
-          {0.020, 0.025, 0.030, 0.035, 0.040, 0.050}};
+          {0.025, 0.030, 0.035, 0.040, 0.050}};
 }
 
 // Long-latency reflex 50-100 ms (Pruszynski & Scott 2012), voluntary

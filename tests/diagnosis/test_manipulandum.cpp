@@ -578,22 +578,17 @@ TEST_CASE("manipulandum: the delayed copies' next reference is the fixed point o
 // 50 ms at 20 N excites the response where the reflex's delay shows, before
 // its first τ and after. The reflex's parameters and the intrinsic D, K it
 // separates from the apparent ones: the delay within 20 %, the gain within
-// 30 %, K and D within 20 % of the intrinsic truth where the plain `pem`
-// holds the reflex (K ≈ (1 + g) K_i, 30 % and more off). K within 20 %, not
-// 10 %: the short pulse carries less of the stiffness (the clean sessions'
-// K at 50 ms: within 10 % in 11/20, "Pulse"), and this session's hidden
-// delay, 25.38 ms, sits where the delay's profile is flat: since the
-// profile starts at 20 ms (docs/diagnosis.md, "The profile from 20 ms") it is
-// named at 23.35 ms, its interval open at 20 ms, with K 16.2 % off (from
-// 25 ms it was named on that grid edge, 25 ms, next to the truth; K was
-// within 15 %). The reflex 0.5 study's K: within 15 % in 9/10 seeds.
+// 30 %, K and D within 15 % and 20 % of the intrinsic truth where the plain
+// `pem` holds the reflex (K ≈ (1 + g) K_i). K within 15 %, not 10 %: the
+// short pulse carries less of the stiffness (the clean sessions' K at 50 ms:
+// within 10 % in 3/5, "Pulse").
 TEST_CASE("manipulandum: hidden short-latency reflex 0.5 with a 50 ms, 20 N pulse is named - the intrinsic D, K recovered") {
   Case c;
   c.effects = {sim::parse_hidden_effect("reflex:0.5")};
   c.pulse_s = 0.05;
   c.pulse_n = 20.0;
   const auto o = run_case(c);
-  check_delayed_copy(c, o, "reflex_gain", 0.30, 0.20, 0.20);
+  check_delayed_copy(c, o, "reflex_gain", 0.30, 0.15, 0.20);
   CHECK(frob(o.pem.k, o.k_intr) > 0.30);
   // Each held-out fold searched the delay on its training trials
   // (docs/diagnosis.md, "Held-out shapes"): ten delays, each near the hidden one.
@@ -609,8 +604,8 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 with a 50 ms, 20 N puls
   // The delay's 95 % profile-likelihood interval (its profile over the
   // delays searched, "The delay's interval"): it holds the hidden delay,
   // reaches past the named one on the side the search profiled beyond it,
-  // and each side is narrower than the grid's 5 ms step. An end at the
-  // search's lowest delay (20 ms) is open there, not invented below it.
+  // and is a few ms wide, not the grid's 5 ms steps either way. An end at the
+  // search's lowest delay (25 ms) is open there, not invented below it.
   const auto* delay = param_named(*f, "delay");
   REQUIRE(delay);
   INFO("delay " << delay->est.value << " [" << delay->est.lo << (delay->lo_open ? " open" : "") << ", " << delay->est.hi
@@ -619,9 +614,8 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 with a 50 ms, 20 N puls
   CHECK(delay->est.hi >= o.draw.reflex_delay_s);
   CHECK(delay->est.hi > delay->est.value);
   CHECK_FALSE(delay->hi_open);
-  CHECK(delay->est.hi - delay->est.value < 0.005);
-  CHECK(delay->est.value - delay->est.lo < 0.005);
-  if (delay->lo_open) CHECK(delay->est.lo == Approx(0.020).margin(1e-9));
+  CHECK(delay->est.hi - delay->est.lo < 0.006);
+  if (delay->lo_open) CHECK(delay->est.lo == Approx(0.025).margin(1e-9));
   // The report prints it: text "delay 0.0… [lo, hi] s", JSON ci95 (and ci95_open where open).
   const auto j = param_json(*delay);
   CHECK(j["ci95"][1] == delay->est.hi);
@@ -632,19 +626,17 @@ TEST_CASE("manipulandum: hidden short-latency reflex 0.5 with a 50 ms, 20 N puls
 // "Passes to the fixed point"): a strong reflex (gain 1.0, the apparent K
 // about twice the intrinsic one) puts the reference D, K it is simulated at
 // far from where the first fit lands. Noise-free, so the check is of the
-// fixed point, not of the session's power. Hidden seed 5007 (delay
-// 27.57 ms, between the profile's 25 and 30 ms), the library restricted to
-// the reflex, 40 movements and 3 held-out folds for time. Measured
-// (2026-12-07): passes to the fixed point with the profile from 20 ms
-// 27.41 ms (−0.16 ms), K 0.15 %, D 0.46 % off the intrinsic truth; two
-// fixed passes, as before the fixed point, 26.89 ms (−0.68 ms), K 3.7 %,
-// D 3.5 %; the profile from 25 ms, as before "The profile from 20 ms",
-// 25.0 ms (−2.6 ms) on its edge. Seed 5000 (32.76 ms), this case until
-// then: 32.41 ms with passes to the fixed point, 30.77 ms with two.
+// fixed point, not of the session's power. Hidden seed 5000 (delay 32.76 ms,
+// between grid points), the library restricted to the reflex, 40 movements
+// and 3 held-out folds for time. Measured (2026-12-07): two fixed passes,
+// as before, named 30.77 ms (−2.0 ms) with K 4.4 % and D 8.9 % off the
+// intrinsic truth; passes until the reference settles 32.41 ms (−0.35 ms),
+// K 0.6 %, D 0.7 % (a settle 10 times tighter gives the same delay: the rest
+// is not the passes').
 TEST_CASE("manipulandum: hidden strong reflex 1.0, noise-free - passes to the fixed point recover the delay and the intrinsic D, K") {
   Case c;
   c.effects = {sim::parse_hidden_effect("reflex:1")};
-  c.hidden_seed = 5007;
+  c.hidden_seed = 5000;
   c.movements = 40;
   c.noise = sim::parse_noise_level("none");
   c.pulse_s = 0.05;
