@@ -948,10 +948,9 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
         // Frobenius errors: which way the corrected estimate misses.
         for (const auto& e : eff)
           if (const auto mp = main_param_of(e, o.draw, 4000.0); const auto* f = o.named_fit(mp.id))
-            for (const auto& p : f->params)
-              if (p.name == mp.param && p.est.hi > p.est.lo)
-                std::fprintf(stderr, "; truth %s %.4g %s its interval", mp.param.c_str(), mp.truth,
-                             mp.truth >= p.est.lo && mp.truth <= p.est.hi ? "inside" : "outside");
+            if (const auto* p = param_named(*f, mp.param); p && p->est.hi > p->est.lo)
+              std::fprintf(stderr, "; truth %s %.4g %s its interval", mp.param.c_str(), mp.truth,
+                           mp.truth >= p->est.lo && mp.truth <= p->est.hi ? "inside" : "outside");
         if (!eff.empty() && eff.front().mechanism == sim::HiddenMechanism::reflex_dir)
           std::fprintf(stderr, "; truth direction %.4g delay %.4g", o.draw.reflex_direction_rad, o.draw.reflex_delay_s);
         std::fprintf(stderr, "; err D11 %+.3f D22 %+.3f K11 %+.3f K22 %+.3f |D| %.3f |K| %.3f", rel(dd(0, 0), dt(0, 0)),
@@ -982,16 +981,15 @@ TEST_CASE("manipulandum: detection study", "[.mstudy]") {
         if (std::find(ids.begin(), ids.end(), a) == ids.end()) ++falsen;
       const auto mp = main_param_of(eff.front(), o.draw, 4000.0);
       if (const auto* f = o.named_fit(mp.id)) {
-        for (const auto& p : f->params)
-          if (p.name == mp.param) {
-            const double er = std::fabs(rel(p.est.value, mp.truth));
-            errs.push_back(er);
-            if (er < 0.2) ++mainok;
-            if (p.est.hi > p.est.lo) {
-              ++with_interval;
-              if (mp.truth >= p.est.lo && mp.truth <= p.est.hi) ++covered;
-            }
+        if (const auto* p = param_named(*f, mp.param)) {
+          const double er = std::fabs(rel(p->est.value, mp.truth));
+          errs.push_back(er);
+          if (er < 0.2) ++mainok;
+          if (p->est.hi > p->est.lo) {
+            ++with_interval;
+            if (mp.truth >= p->est.lo && mp.truth <= p->est.hi) ++covered;
           }
+        }
         if (f->heldout_done && f->heldout.mean > 0) ++gain;
       }
     }
